@@ -1,0 +1,193 @@
+//! File formats: point readers (PLY, LAS/LAZ, XYZ/PTS), the `.conf` scan list, and writers.
+//!
+//! Every reader is a [`PointReader`]: it parses its header once when opened, then splits
+//! the point data into [`ChunkSpec`]s that workers read independently, each through its own
+//! memory-mapped window (so resident memory stays proportional to the chunks in flight,
+//! never to the file). Locations in errors are absolute: element index and byte offset (binary)
+//! or line (text), counted from the start of the file.
+
+pub mod conf;
+pub mod las;
+pub mod mmap;
+pub mod ply;
+pub mod ply_write;
+pub mod xyz;
+
+use std::path::{Path, PathBuf};
+
+use crate::error::{Error, Location, Result};
+use crate::types::{Attributes, PointBatch, Rigid};
+
+/// The formats scanflow reads.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+#[non_exhaustive]
+pub enum Format {
+    /// PLY, ascii.
+    PlyAscii,
+    /// PLY, binary little endian.
+    PlyBinaryLe,
+    /// PLY, binary big endian.
+    PlyBinaryBe,
+    /// LAS (uncompressed).
+    Las,
+    /// LAZ (LASzip-compressed LAS).
+    Laz,
+    /// Whitespace-separated text, one point a line.
+    Xyz,
+}
+
+impl Format {
+    /// A short human name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Format::PlyAscii => "PLY ascii",
+            Format::PlyBinaryLe => "PLY binary_little_endian",
+            Format::PlyBinaryBe => "PLY binary_big_endian",
+            Format::Las => "LAS",
+            Format::Laz => "LAZ",
+            Format::Xyz => "XYZ text",
+        }
+    }
+}
+
+/// A contiguous run of points of one file, read by one worker.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ChunkSpec {
+    /// First byte of the chunk's data.
+    pub byte_start: u64,
+    /// One past the last byte.
+    pub byte_end: u64,
+    /// Index of the chunk's first point within the file.
+    pub first_index: u64,
+    /// Number of points (records, or data lines for text) in the chunk.
+    pub count: u64,
+    /// 1-based line number of the chunk's first byte (text formats; 0 for binary).
+    pub first_line: u64,
+}
+
+/// What reading a chunk produced besides the points.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct ChunkStats {
+    /// Points dropped because a coordinate was NaN or infinite (only with `skip_invalid`).
+    pub skipped_invalid: u64,
+}
+
+/// A point file opened for reading: header parsed, data split into chunks on demand.
+pub trait PointReader: Send + Sync {
+    /// The file.
+    fn path(&self) -> &Path;
+    /// Its format.
+    fn format(&self) -> Format;
+    /// Attributes the file carries.
+    fn attributes(&self) -> Attributes;
+    /// Number of points (records) in the file.
+    fn len(&self) -> u64;
+    /// True when the file holds no point.
+    fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+    /// Bounds from the header, when the format stores them (LAS).
+    fn header_bounds(&self) -> Option<crate::types::Aabb> {
+        None
+    }
+    /// Split the points into chunks of about `target_points` points each, in file order.
+    /// Chunks cover every point exactly once.
+    fn chunks(&self, target_points: u64) -> Result<Vec<ChunkSpec>>;
+    /// Append the chunk's points to `out`, carrying the attributes of [`PointReader::attributes`].
+    /// A NaN or infinite coordinate is an error naming the element, or, with `skip_invalid`,
+    /// the point is dropped and counted.
+    fn read_chunk(
+        &self,
+        chunk: &ChunkSpec,
+        skip_invalid: bool,
+        out: &mut PointBatch,
+    ) -> Result<ChunkStats>;
+}
+
+/// One input: a file and the rigid transform that takes its points to the common frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct InputSpec {
+    /// The file.
+    pub path: PathBuf,
+    /// Transform to apply (identity when none).
+    pub transform: Rigid,
+}
+
+impl InputSpec {
+    /// An input without transform.
+    pub fn plain(path: impl Into<PathBuf>) -> InputSpec {
+        InputSpec {
+            path: path.into(),
+            transform: Rigid::IDENTITY,
+        }
+    }
+}
+
+/// Open a point file, choosing the reader by content (PLY magic, LAS signature) and, for text,
+/// by extension (`.xyz`, `.pts`, `.txt`, `.csv` is not supported).
+pub fn open(path: &Path) -> Result<Box<dyn PointReader>> {
+    let meta = std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
+    if meta.is_dir() {
+        return Err(Error::input(path, "is a directory, expected a point file"));
+    }
+    if meta.len() == 0 {
+        return Err(Error::input(path, "empty file (0 bytes)"));
+    }
+    let mut magic = [0u8; 4];
+    {
+        use std::io::Read;
+        let mut f = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+        let n = f.read(&mut magic).map_err(|e| Error::io(path, e))?;
+        if n < 4 {
+            magic[n..].fill(0);
+        }
+    }
+    if &magic[..3] == b"ply" {
+        return Ok(Box::new(ply::PlyReader::open(path)?));
+    }
+    if &magic == b"LASF" {
+        return Ok(Box::new(las::LasReader::open(path)?));
+    }
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(|e| e.to_ascii_lowercase())
+        .unwrap_or_default();
+    match ext.as_str() {
+        "xyz" | "pts" | "txt" | "xyzn" | "xyzrgb" => Ok(Box::new(xyz::XyzReader::open(path)?)),
+        "ply" => Err(Error::format(
+            path,
+            Location::Byte(0),
+            "not a PLY file: it does not start with the magic line \"ply\"",
+        )),
+        "las" | "laz" => Err(Error::format(
+            path,
+            Location::Byte(0),
+            "not a LAS file: it does not start with the signature \"LASF\"",
+        )),
+        _ => Err(Error::input(
+            path,
+            "unknown point format: expected a PLY or LAS/LAZ file, or text with extension .xyz, .pts or .txt",
+        )),
+    }
+}
+
+/// Which coordinate of `p` is not finite, if any.
+#[inline]
+pub fn non_finite_axis(p: [f64; 3]) -> Option<&'static str> {
+    if !p[0].is_finite() {
+        Some("x")
+    } else if !p[1].is_finite() {
+        Some("y")
+    } else if !p[2].is_finite() {
+        Some("z")
+    } else {
+        None
+    }
+}
+
+/// Message for a non-finite coordinate.
+pub fn non_finite_msg(axis: &str, v: f64) -> String {
+    format!("{axis} is {v}, expected a finite coordinate (use --skip-invalid to drop such points)")
+}

@@ -1,0 +1,1126 @@
+//! PLY point reader: ascii, binary_little_endian and binary_big_endian.
+//!
+//! The header is parsed once into [`PlyHeader`]; vertex properties may come in any order and
+//! of any scalar type (`char`…`double` and the `int8`…`float64` spellings). Elements before
+//! `vertex` (a `camera`, say) are skipped by size, walking their lists where they have any;
+//! elements after it (faces, `range_grid`, `tristrips`) are walked once at open time in binary
+//! files, so that a truncated file is reported at open, never half-read.
+//!
+//! Binary vertex records are decoded straight from a memory-mapped window per chunk. ply-rs
+//! parses whole files into owned maps and gives no byte offsets, so the reader is ours.
+
+use std::fs::File;
+use std::path::{Path, PathBuf};
+
+use crate::error::{Error, IoContext, Location, Result};
+use crate::io::mmap::Window;
+use crate::io::{ChunkSpec, ChunkStats, Format, PointReader, non_finite_axis, non_finite_msg};
+use crate::types::{Attributes, PointBatch};
+
+/// A PLY scalar type.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Scalar {
+    /// int8
+    I8,
+    /// uint8
+    U8,
+    /// int16
+    I16,
+    /// uint16
+    U16,
+    /// int32
+    I32,
+    /// uint32
+    U32,
+    /// float32
+    F32,
+    /// float64
+    F64,
+}
+
+impl Scalar {
+    /// Parse a type name in either spelling.
+    pub fn parse(s: &str) -> Option<Scalar> {
+        Some(match s {
+            "char" | "int8" => Scalar::I8,
+            "uchar" | "uint8" => Scalar::U8,
+            "short" | "int16" => Scalar::I16,
+            "ushort" | "uint16" => Scalar::U16,
+            "int" | "int32" => Scalar::I32,
+            "uint" | "uint32" => Scalar::U32,
+            "float" | "float32" => Scalar::F32,
+            "double" | "float64" => Scalar::F64,
+            _ => return None,
+        })
+    }
+
+    /// Size in bytes.
+    pub fn size(self) -> usize {
+        match self {
+            Scalar::I8 | Scalar::U8 => 1,
+            Scalar::I16 | Scalar::U16 => 2,
+            Scalar::I32 | Scalar::U32 | Scalar::F32 => 4,
+            Scalar::F64 => 8,
+        }
+    }
+
+    /// Decode one value from the start of `b`.
+    #[inline(always)]
+    pub fn read(self, b: &[u8], big_endian: bool) -> f64 {
+        macro_rules! rd {
+            ($t:ty, $n:expr) => {{
+                let mut a = [0u8; $n];
+                a.copy_from_slice(&b[..$n]);
+                (if big_endian {
+                    <$t>::from_be_bytes(a)
+                } else {
+                    <$t>::from_le_bytes(a)
+                }) as f64
+            }};
+        }
+        match self {
+            Scalar::I8 => b[0] as i8 as f64,
+            Scalar::U8 => b[0] as f64,
+            Scalar::I16 => rd!(i16, 2),
+            Scalar::U16 => rd!(u16, 2),
+            Scalar::I32 => rd!(i32, 4),
+            Scalar::U32 => rd!(u32, 4),
+            Scalar::F32 => rd!(f32, 4),
+            Scalar::F64 => rd!(f64, 8),
+        }
+    }
+
+    fn is_float(self) -> bool {
+        matches!(self, Scalar::F32 | Scalar::F64)
+    }
+
+    /// Largest value of an integer type (used to scale colours); 1 for floats.
+    fn full_scale(self) -> f64 {
+        match self {
+            Scalar::I8 => 127.0,
+            Scalar::U8 => 255.0,
+            Scalar::I16 => 32767.0,
+            Scalar::U16 => 65535.0,
+            Scalar::I32 => i32::MAX as f64,
+            Scalar::U32 => u32::MAX as f64,
+            Scalar::F32 | Scalar::F64 => 1.0,
+        }
+    }
+}
+
+/// A property of an element.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Property {
+    /// A scalar.
+    Scalar {
+        /// Name.
+        name: String,
+        /// Type.
+        ty: Scalar,
+    },
+    /// A list: a count, then that many items.
+    List {
+        /// Name.
+        name: String,
+        /// Type of the count.
+        count: Scalar,
+        /// Type of the items.
+        item: Scalar,
+    },
+}
+
+impl Property {
+    fn name(&self) -> &str {
+        match self {
+            Property::Scalar { name, .. } | Property::List { name, .. } => name,
+        }
+    }
+}
+
+/// An element declaration.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Element {
+    /// Name.
+    pub name: String,
+    /// Number of records.
+    pub count: u64,
+    /// Properties in file order.
+    pub props: Vec<Property>,
+    /// Header line (1-based) that declared it.
+    pub line: u64,
+}
+
+impl Element {
+    /// Size of one record when it has no list, in bytes.
+    fn fixed_size(&self) -> Option<u64> {
+        let mut s = 0u64;
+        for p in &self.props {
+            match p {
+                Property::Scalar { ty, .. } => s += ty.size() as u64,
+                Property::List { .. } => return None,
+            }
+        }
+        Some(s)
+    }
+}
+
+/// The storage format line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Encoding {
+    /// Text.
+    Ascii,
+    /// Binary little endian.
+    BinaryLe,
+    /// Binary big endian.
+    BinaryBe,
+}
+
+/// A parsed PLY header.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PlyHeader {
+    /// Storage format.
+    pub encoding: Encoding,
+    /// Elements in file order.
+    pub elements: Vec<Element>,
+    /// Byte offset of the first byte after `end_header\n`.
+    pub data_start: u64,
+    /// Number of header lines, `end_header` included.
+    pub lines: u64,
+}
+
+/// Parse a header from the first bytes of a file. `bytes` may be longer than the header.
+pub fn parse_header(path: &Path, bytes: &[u8]) -> Result<PlyHeader> {
+    let mut pos = 0usize;
+    let mut line_no = 0u64;
+    let mut encoding = None;
+    let mut elements: Vec<Element> = Vec::new();
+    loop {
+        let Some(nl) = bytes[pos..].iter().position(|&b| b == b'\n') else {
+            return Err(Error::format(
+                path,
+                Location::Byte(bytes.len() as u64),
+                format!(
+                    "PLY header has no end_header line (read {} header lines, then the {})",
+                    line_no,
+                    if bytes.len() >= HEADER_LIMIT {
+                        "header size limit of 1 MiB"
+                    } else {
+                        "end of the file"
+                    }
+                ),
+            ));
+        };
+        let raw = &bytes[pos..pos + nl];
+        let line_start = pos;
+        pos += nl + 1;
+        line_no += 1;
+        let raw = raw.strip_suffix(b"\r").unwrap_or(raw);
+        let Ok(line) = std::str::from_utf8(raw) else {
+            return Err(Error::format(
+                path,
+                Location::Line(line_no),
+                format!("PLY header line is not text (byte {line_start})"),
+            ));
+        };
+        let toks: Vec<&str> = line.split_ascii_whitespace().collect();
+        let bad = |msg: String| Error::format(path, Location::Line(line_no), msg);
+        if line_no == 1 {
+            if line.trim_end() != "ply" {
+                return Err(Error::format(
+                    path,
+                    Location::Byte(0),
+                    "not a PLY file: the first line must be \"ply\"",
+                ));
+            }
+            continue;
+        }
+        match toks.first().copied() {
+            None => continue,
+            Some("comment") | Some("obj_info") => continue,
+            Some("format") => {
+                if toks.len() != 3 {
+                    return Err(bad(format!(
+                        "expected \"format <ascii|binary_little_endian|binary_big_endian> 1.0\", found \"{line}\""
+                    )));
+                }
+                encoding = Some(match toks[1] {
+                    "ascii" => Encoding::Ascii,
+                    "binary_little_endian" => Encoding::BinaryLe,
+                    "binary_big_endian" => Encoding::BinaryBe,
+                    other => {
+                        return Err(bad(format!(
+                            "unknown PLY format \"{other}\", expected ascii, binary_little_endian or binary_big_endian"
+                        )));
+                    }
+                });
+            }
+            Some("element") => {
+                if toks.len() != 3 {
+                    return Err(bad(format!(
+                        "expected \"element <name> <count>\", found \"{line}\""
+                    )));
+                }
+                let count: u64 = toks[2].parse().map_err(|_| {
+                    bad(format!(
+                        "element count \"{}\" is not a non-negative integer",
+                        toks[2]
+                    ))
+                })?;
+                elements.push(Element {
+                    name: toks[1].to_string(),
+                    count,
+                    props: Vec::new(),
+                    line: line_no,
+                });
+            }
+            Some("property") => {
+                let Some(el) = elements.last_mut() else {
+                    return Err(bad("property before any element".into()));
+                };
+                let prop = if toks.get(1) == Some(&"list") {
+                    if toks.len() != 5 {
+                        return Err(bad(format!(
+                            "expected \"property list <count type> <item type> <name>\", found \"{line}\""
+                        )));
+                    }
+                    let count = Scalar::parse(toks[2])
+                        .ok_or_else(|| bad(format!("unknown property type \"{}\"", toks[2])))?;
+                    if count.is_float() {
+                        return Err(bad(format!(
+                            "list count type must be an integer type, found \"{}\"",
+                            toks[2]
+                        )));
+                    }
+                    let item = Scalar::parse(toks[3])
+                        .ok_or_else(|| bad(format!("unknown property type \"{}\"", toks[3])))?;
+                    Property::List {
+                        name: toks[4].to_string(),
+                        count,
+                        item,
+                    }
+                } else {
+                    if toks.len() != 3 {
+                        return Err(bad(format!(
+                            "expected \"property <type> <name>\", found \"{line}\""
+                        )));
+                    }
+                    let ty = Scalar::parse(toks[1]).ok_or_else(|| {
+                        bad(format!(
+                            "unknown property type \"{}\" (expected char, uchar, short, ushort, int, uint, float, double or int8…float64)",
+                            toks[1]
+                        ))
+                    })?;
+                    Property::Scalar {
+                        name: toks[2].to_string(),
+                        ty,
+                    }
+                };
+                el.props.push(prop);
+            }
+            Some("end_header") => break,
+            Some(other) => {
+                return Err(bad(format!("unknown PLY header keyword \"{other}\"")));
+            }
+        }
+    }
+    let Some(encoding) = encoding else {
+        return Err(Error::format(
+            path,
+            Location::Line(2),
+            "PLY header has no format line",
+        ));
+    };
+    Ok(PlyHeader {
+        encoding,
+        elements,
+        data_start: pos as u64,
+        lines: line_no,
+    })
+}
+
+const HEADER_LIMIT: usize = 1 << 20;
+
+/// Where each wanted attribute sits in a vertex record.
+#[derive(Debug, Clone, Copy)]
+struct Field {
+    /// Byte offset within a binary record, or token index for ascii.
+    at: usize,
+    ty: Scalar,
+}
+
+#[derive(Debug, Clone, Default)]
+struct Layout {
+    xyz: Option<[Field; 3]>,
+    normal: Option<[Field; 3]>,
+    rgb: Option<[Field; 3]>,
+    alpha: Option<Field>,
+    intensity: Option<Field>,
+    confidence: Option<Field>,
+}
+
+/// A PLY file opened for reading points.
+pub struct PlyReader {
+    path: PathBuf,
+    file: File,
+    header: PlyHeader,
+    /// Index of the vertex element.
+    vertex: usize,
+    layout: Layout,
+    /// Binary: record size. Ascii: number of tokens per vertex line.
+    stride: usize,
+    /// Byte where vertex data starts.
+    vertex_start: u64,
+    /// Ascii: line number of the first vertex line, and an index of (byte, line, element)
+    /// every [`ASCII_INDEX_STEP`] vertices, ending with the position after the last vertex.
+    ascii_index: Vec<(u64, u64, u64)>,
+    attrs: Attributes,
+}
+
+const ASCII_INDEX_STEP: u64 = 1 << 16;
+const SCAN_WINDOW: u64 = 64 << 20;
+
+impl PlyReader {
+    /// Open and validate a PLY file: header, vertex properties, and (binary) that the file
+    /// holds every element the header declares.
+    pub fn open(path: &Path) -> Result<PlyReader> {
+        let file = File::open(path).with_path(path)?;
+        let file_len = file.metadata().with_path(path)?.len();
+        if file_len == 0 {
+            return Err(Error::input(path, "empty file (0 bytes)"));
+        }
+        let head = Window::map(&file, path, 0, file_len.min(HEADER_LIMIT as u64))?;
+        let header = parse_header(path, &head)?;
+        drop(head);
+        let Some(vertex) = header.elements.iter().position(|e| e.name == "vertex") else {
+            return Err(Error::format(
+                path,
+                Location::Line(header.lines),
+                "PLY header declares no \"vertex\" element",
+            ));
+        };
+        let el = &header.elements[vertex];
+        if let Some(p) = el.props.iter().find(|p| matches!(p, Property::List { .. })) {
+            return Err(Error::format(
+                path,
+                Location::Line(el.line),
+                format!(
+                    "vertex element has a list property \"{}\"; vertex properties must be scalars",
+                    p.name()
+                ),
+            ));
+        }
+        let binary = header.encoding != Encoding::Ascii;
+        let mut offsets = Vec::with_capacity(el.props.len());
+        let mut off = 0usize;
+        for (i, p) in el.props.iter().enumerate() {
+            let Property::Scalar { name, ty } = p else {
+                unreachable!("lists rejected above")
+            };
+            offsets.push((
+                name.as_str(),
+                Field {
+                    at: if binary { off } else { i },
+                    ty: *ty,
+                },
+            ));
+            off += ty.size();
+        }
+        let find = |names: &[&str]| {
+            offsets
+                .iter()
+                .find(|(n, _)| names.contains(n))
+                .map(|&(_, f)| f)
+        };
+        let x = find(&["x"]);
+        let y = find(&["y"]);
+        let z = find(&["z"]);
+        let (Some(x), Some(y), Some(z)) = (x, y, z) else {
+            let missing: Vec<&str> = [("x", x), ("y", y), ("z", z)]
+                .iter()
+                .filter(|(_, f)| f.is_none())
+                .map(|(n, _)| *n)
+                .collect();
+            return Err(Error::format(
+                path,
+                Location::Line(el.line),
+                format!(
+                    "vertex element has no {} property (found: {})",
+                    missing.join(", "),
+                    offsets
+                        .iter()
+                        .map(|(n, _)| *n)
+                        .collect::<Vec<_>>()
+                        .join(" ")
+                ),
+            ));
+        };
+        let tri = |a: &[&str], b: &[&str], c: &[&str]| match (find(a), find(b), find(c)) {
+            (Some(a), Some(b), Some(c)) => Some([a, b, c]),
+            _ => None,
+        };
+        let layout = Layout {
+            xyz: Some([x, y, z]),
+            normal: tri(
+                &["nx", "normal_x"],
+                &["ny", "normal_y"],
+                &["nz", "normal_z"],
+            ),
+            rgb: tri(
+                &["red", "r", "diffuse_red"],
+                &["green", "g", "diffuse_green"],
+                &["blue", "b", "diffuse_blue"],
+            ),
+            alpha: find(&["alpha", "a", "diffuse_alpha"]),
+            intensity: find(&["intensity", "scalar_intensity"]),
+            confidence: find(&["confidence", "scalar_confidence"]),
+        };
+        let attrs = Attributes {
+            normal: layout.normal.is_some(),
+            color: layout.rgb.is_some(),
+            alpha: layout.rgb.is_some() && layout.alpha.is_some(),
+            intensity: layout.intensity.is_some(),
+            confidence: layout.confidence.is_some(),
+        };
+        let stride = if binary { off } else { el.props.len() };
+        let mut r = PlyReader {
+            path: path.to_path_buf(),
+            file,
+            vertex,
+            layout,
+            stride,
+            vertex_start: 0,
+            ascii_index: Vec::new(),
+            attrs,
+            header,
+        };
+        if binary {
+            r.validate_binary(file_len)?;
+        } else {
+            r.index_ascii(file_len)?;
+        }
+        Ok(r)
+    }
+
+    /// The parsed header.
+    pub fn header(&self) -> &PlyHeader {
+        &self.header
+    }
+
+    fn big_endian(&self) -> bool {
+        self.header.encoding == Encoding::BinaryBe
+    }
+
+    /// Walk every element's extent; fail on the first one the file does not fully hold.
+    fn validate_binary(&mut self, file_len: u64) -> Result<()> {
+        let mut pos = self.header.data_start;
+        for (i, el) in self.header.elements.iter().enumerate() {
+            if i == self.vertex {
+                self.vertex_start = pos;
+            }
+            let end = match el.fixed_size() {
+                Some(sz) => {
+                    let end = sz
+                        .checked_mul(el.count)
+                        .and_then(|b| b.checked_add(pos))
+                        .unwrap_or(u64::MAX);
+                    if end > file_len {
+                        let have = (file_len - pos.min(file_len)).checked_div(sz).unwrap_or(0);
+                        return Err(Error::format(
+                            &self.path,
+                            Location::Element {
+                                index: have,
+                                byte: pos + have * sz,
+                            },
+                            format!(
+                                "truncated: the header promises {} \"{}\" records of {} bytes from byte {}, but the file ends at byte {} after {} of them",
+                                el.count, el.name, sz, pos, file_len, have
+                            ),
+                        ));
+                    }
+                    end
+                }
+                None => self.walk_lists(el, pos, file_len)?,
+            };
+            pos = end;
+        }
+        Ok(())
+    }
+
+    /// Walk a binary element with list properties record by record; return its end.
+    fn walk_lists(&self, el: &Element, start: u64, file_len: u64) -> Result<u64> {
+        let be = self.big_endian();
+        let mut pos = start;
+        let mut win_start = start;
+        let mut win = Window::map(
+            &self.file,
+            &self.path,
+            start,
+            file_len.min(start + SCAN_WINDOW),
+        )?;
+        let truncated = |rec: u64, at: u64| {
+            Error::format(
+                &self.path,
+                Location::Element {
+                    index: rec,
+                    byte: at,
+                },
+                format!(
+                    "truncated: the header promises {} \"{}\" records, but the file ends at byte {} inside record {}",
+                    el.count, el.name, file_len, rec
+                ),
+            )
+        };
+        for rec in 0..el.count {
+            let rec_start = pos;
+            for p in &el.props {
+                let (need_now, item) = match p {
+                    Property::Scalar { ty, .. } => (ty.size() as u64, None),
+                    Property::List { count, item, .. } => (count.size() as u64, Some(*item)),
+                };
+                // Make sure the window holds [pos, pos + need_now).
+                if pos + need_now > win_start + win.len() as u64 {
+                    if pos + need_now > file_len {
+                        return Err(truncated(rec, rec_start));
+                    }
+                    win_start = pos;
+                    win =
+                        Window::map(&self.file, &self.path, pos, file_len.min(pos + SCAN_WINDOW))?;
+                }
+                if let (Property::List { count, .. }, Some(item)) = (p, item) {
+                    let at = (pos - win_start) as usize;
+                    let n = count.read(&win[at..], be);
+                    if n < 0.0 {
+                        return Err(Error::format(
+                            &self.path,
+                            Location::Element {
+                                index: rec,
+                                byte: rec_start,
+                            },
+                            format!(
+                                "\"{}\" record {} has a negative list length {}",
+                                el.name, rec, n
+                            ),
+                        ));
+                    }
+                    pos += need_now + n as u64 * item.size() as u64;
+                } else {
+                    pos += need_now;
+                }
+                if pos > file_len {
+                    return Err(truncated(rec, rec_start));
+                }
+            }
+        }
+        Ok(pos)
+    }
+
+    /// Ascii: find the first vertex line and index vertex lines; fail if there are too few.
+    fn index_ascii(&mut self, file_len: u64) -> Result<()> {
+        let skip_lines: u64 = self.header.elements[..self.vertex]
+            .iter()
+            .map(|e| e.count)
+            .sum();
+        let total = self.header.elements[self.vertex].count;
+        let mut line = self.header.lines + 1;
+        let mut pos = self.header.data_start;
+        let mut vertices_seen = 0u64;
+        let mut skipped = 0u64;
+        let mut index = Vec::new();
+        let mut in_vertex = skip_lines == 0;
+        if in_vertex {
+            self.vertex_start = pos;
+            index.push((pos, line, 0));
+        }
+        while (skipped < skip_lines || vertices_seen < total) && pos < file_len {
+            let end = file_len.min(pos + SCAN_WINDOW);
+            let win = Window::map(&self.file, &self.path, pos, end)?;
+            let mut i = 0usize;
+            while i < win.len() && (skipped < skip_lines || vertices_seen < total) {
+                let Some(nl) = win[i..].iter().position(|&b| b == b'\n') else {
+                    if end == file_len {
+                        // Last line without newline.
+                        i = win.len();
+                        if in_vertex {
+                            vertices_seen += 1;
+                        } else {
+                            skipped += 1;
+                        }
+                        line += 1;
+                    }
+                    break;
+                };
+                i += nl + 1;
+                line += 1;
+                if in_vertex {
+                    vertices_seen += 1;
+                    if vertices_seen.is_multiple_of(ASCII_INDEX_STEP) {
+                        index.push((pos + i as u64, line, vertices_seen));
+                    }
+                } else {
+                    skipped += 1;
+                    if skipped == skip_lines {
+                        in_vertex = true;
+                        self.vertex_start = pos + i as u64;
+                        index.push((pos + i as u64, line, 0));
+                    }
+                }
+            }
+            if i == 0 {
+                break;
+            }
+            pos += i as u64;
+        }
+        if vertices_seen < total {
+            return Err(Error::format(
+                &self.path,
+                Location::Line(line),
+                format!(
+                    "truncated: the header promises {} vertices, but the file ends after {} vertex lines",
+                    total, vertices_seen
+                ),
+            ));
+        }
+        if index.last().map(|e| e.2) != Some(total) {
+            index.push((pos, line, total));
+        }
+        self.ascii_index = index;
+        Ok(())
+    }
+
+    fn read_binary(
+        &self,
+        chunk: &ChunkSpec,
+        skip_invalid: bool,
+        out: &mut PointBatch,
+    ) -> Result<ChunkStats> {
+        let win = Window::map(&self.file, &self.path, chunk.byte_start, chunk.byte_end)?;
+        let be = self.big_endian();
+        let l = &self.layout;
+        let fields = [l.xyz, l.normal].into_iter().flatten().flatten();
+        let all_f32_le = !be
+            && l.rgb.is_none()
+            && fields
+                .chain(l.intensity)
+                .chain(l.confidence)
+                .all(|f| f.ty == Scalar::F32);
+        // The common case (every wanted field float32, little endian) gets its own
+        // monomorphised loop without a type dispatch per value.
+        if all_f32_le {
+            self.decode_records(&win, chunk, skip_invalid, out, |rec: &[u8], f: Field| {
+                let mut a = [0u8; 4];
+                a.copy_from_slice(&rec[f.at..f.at + 4]);
+                f32::from_le_bytes(a) as f64
+            })
+        } else {
+            self.decode_records(&win, chunk, skip_invalid, out, |rec: &[u8], f: Field| {
+                f.ty.read(&rec[f.at..], be)
+            })
+        }
+    }
+
+    #[inline(always)]
+    fn decode_records(
+        &self,
+        win: &[u8],
+        chunk: &ChunkSpec,
+        skip_invalid: bool,
+        out: &mut PointBatch,
+        get: impl Fn(&[u8], Field) -> f64,
+    ) -> Result<ChunkStats> {
+        let l = &self.layout;
+        let [fx, fy, fz] = l.xyz.unwrap_or(
+            [Field {
+                at: 0,
+                ty: Scalar::F32,
+            }; 3],
+        );
+        let mut stats = ChunkStats::default();
+        let n = chunk.count as usize;
+        out.pos.reserve(n);
+        for (i, rec) in win.chunks_exact(self.stride).take(n).enumerate() {
+            let p = [get(rec, fx), get(rec, fy), get(rec, fz)];
+            if let Some(axis) = non_finite_axis(p) {
+                if skip_invalid {
+                    stats.skipped_invalid += 1;
+                    continue;
+                }
+                let index = chunk.first_index + i as u64;
+                let v = match axis {
+                    "x" => p[0],
+                    "y" => p[1],
+                    _ => p[2],
+                };
+                return Err(Error::format(
+                    &self.path,
+                    Location::Element {
+                        index,
+                        byte: self.vertex_start + index * self.stride as u64,
+                    },
+                    non_finite_msg(axis, v),
+                ));
+            }
+            out.pos.push(p);
+            self.push_attrs(out, |f: Field| get(rec, f));
+        }
+        Ok(stats)
+    }
+
+    #[inline(always)]
+    fn push_attrs(&self, out: &mut PointBatch, get: impl Fn(Field) -> f64) {
+        let l = &self.layout;
+        if let Some([a, b, c]) = l.normal {
+            out.normal
+                .push([get(a) as f32, get(b) as f32, get(c) as f32]);
+        }
+        if let Some([r, g, b]) = l.rgb {
+            let conv = |f: Field| {
+                let v = get(f) / f.ty.full_scale() * 65535.0;
+                v.round().clamp(0.0, 65535.0) as u16
+            };
+            let a = l.alpha.map(conv).unwrap_or(u16::MAX);
+            out.color.push([conv(r), conv(g), conv(b), a]);
+        }
+        if let Some(f) = l.intensity {
+            out.intensity.push(get(f) as f32);
+        }
+        if let Some(f) = l.confidence {
+            out.confidence.push(get(f) as f32);
+        }
+    }
+
+    fn read_ascii(
+        &self,
+        chunk: &ChunkSpec,
+        skip_invalid: bool,
+        out: &mut PointBatch,
+    ) -> Result<ChunkStats> {
+        let win = Window::map(&self.file, &self.path, chunk.byte_start, chunk.byte_end)?;
+        let mut stats = ChunkStats::default();
+        let mut vals = vec![0f64; self.stride];
+        let [fx, fy, fz] = self.layout.xyz.unwrap_or(
+            [Field {
+                at: 0,
+                ty: Scalar::F32,
+            }; 3],
+        );
+        let mut rest: &[u8] = &win;
+        for i in 0..chunk.count {
+            let line_no = chunk.first_line + i;
+            let index = chunk.first_index + i;
+            let (line, tail) = match rest.iter().position(|&b| b == b'\n') {
+                Some(nl) => (&rest[..nl], &rest[nl + 1..]),
+                None => (rest, &rest[rest.len()..]),
+            };
+            rest = tail;
+            let text = std::str::from_utf8(line).map_err(|_| {
+                Error::format(
+                    &self.path,
+                    Location::Line(line_no),
+                    "vertex line is not text",
+                )
+            })?;
+            let mut n = 0usize;
+            for tok in text.split_ascii_whitespace() {
+                if n == self.stride {
+                    n += 1;
+                    break;
+                }
+                vals[n] = tok.parse::<f64>().map_err(|_| {
+                    Error::format(
+                        &self.path,
+                        Location::ElementLine {
+                            index,
+                            line: line_no,
+                        },
+                        format!("value {} \"{}\" is not a number", n + 1, tok),
+                    )
+                })?;
+                n += 1;
+            }
+            if n != self.stride {
+                return Err(Error::format(
+                    &self.path,
+                    Location::ElementLine {
+                        index,
+                        line: line_no,
+                    },
+                    format!(
+                        "expected {} values per vertex line as the header declares, found {}",
+                        self.stride,
+                        if n > self.stride {
+                            "more".to_string()
+                        } else {
+                            n.to_string()
+                        }
+                    ),
+                ));
+            }
+            let p = [vals[fx.at], vals[fy.at], vals[fz.at]];
+            if let Some(axis) = non_finite_axis(p) {
+                if skip_invalid {
+                    stats.skipped_invalid += 1;
+                    continue;
+                }
+                let v = p[["x", "y", "z"].iter().position(|a| *a == axis).unwrap_or(0)];
+                return Err(Error::format(
+                    &self.path,
+                    Location::ElementLine {
+                        index,
+                        line: line_no,
+                    },
+                    non_finite_msg(axis, v),
+                ));
+            }
+            out.pos.push(p);
+            self.push_attrs(out, |f: Field| vals[f.at]);
+        }
+        Ok(stats)
+    }
+}
+
+impl PointReader for PlyReader {
+    fn path(&self) -> &Path {
+        &self.path
+    }
+
+    fn format(&self) -> Format {
+        match self.header.encoding {
+            Encoding::Ascii => Format::PlyAscii,
+            Encoding::BinaryLe => Format::PlyBinaryLe,
+            Encoding::BinaryBe => Format::PlyBinaryBe,
+        }
+    }
+
+    fn attributes(&self) -> Attributes {
+        self.attrs
+    }
+
+    fn len(&self) -> u64 {
+        self.header.elements[self.vertex].count
+    }
+
+    fn chunks(&self, target_points: u64) -> Result<Vec<ChunkSpec>> {
+        let target = target_points.max(1);
+        let total = self.len();
+        let mut out = Vec::new();
+        if self.header.encoding == Encoding::Ascii {
+            // Chunks are unions of consecutive index steps.
+            let steps = (target / ASCII_INDEX_STEP).max(1) as usize;
+            let idx = &self.ascii_index;
+            let mut k = 0;
+            while k + 1 < idx.len() {
+                let e = (k + steps).min(idx.len() - 1);
+                let (b0, l0, i0) = idx[k];
+                let (b1, _, i1) = idx[e];
+                if i1 > i0 {
+                    out.push(ChunkSpec {
+                        byte_start: b0,
+                        byte_end: b1,
+                        first_index: i0,
+                        count: i1 - i0,
+                        first_line: l0,
+                    });
+                }
+                k = e;
+            }
+            return Ok(out);
+        }
+        let stride = self.stride as u64;
+        let mut i = 0;
+        while i < total {
+            let n = target.min(total - i);
+            out.push(ChunkSpec {
+                byte_start: self.vertex_start + i * stride,
+                byte_end: self.vertex_start + (i + n) * stride,
+                first_index: i,
+                count: n,
+                first_line: 0,
+            });
+            i += n;
+        }
+        Ok(out)
+    }
+
+    fn read_chunk(
+        &self,
+        chunk: &ChunkSpec,
+        skip_invalid: bool,
+        out: &mut PointBatch,
+    ) -> Result<ChunkStats> {
+        match self.header.encoding {
+            Encoding::Ascii => self.read_ascii(chunk, skip_invalid, out),
+            _ => self.read_binary(chunk, skip_invalid, out),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn write(dir: &Path, name: &str, bytes: &[u8]) -> PathBuf {
+        let p = dir.join(name);
+        std::fs::write(&p, bytes).unwrap();
+        p
+    }
+
+    fn read_all(r: &dyn PointReader, target: u64) -> PointBatch {
+        let mut b = PointBatch::default();
+        for c in r.chunks(target).unwrap() {
+            r.read_chunk(&c, false, &mut b).unwrap();
+        }
+        b
+    }
+
+    fn binary_ply(be: bool, n: usize) -> Vec<u8> {
+        let mut v = format!(
+            "ply\nformat binary_{}_endian 1.0\nelement camera 1\nproperty float a\nproperty int b\nelement vertex {n}\nproperty uchar red\nproperty double z\nproperty float y\nproperty short x\nproperty uchar green\nproperty uchar blue\nproperty float confidence\nelement face 2\nproperty list uchar int vertex_indices\nend_header\n",
+            if be { "big" } else { "little" }
+        )
+        .into_bytes();
+        let put = |v: &mut Vec<u8>, b: &[u8]| {
+            if be {
+                v.extend(b.iter().rev())
+            } else {
+                v.extend(b)
+            }
+        };
+        put(&mut v, &1.5f32.to_le_bytes());
+        put(&mut v, &7i32.to_le_bytes());
+        for i in 0..n {
+            v.push(255);
+            put(&mut v, &(i as f64 * 0.5).to_le_bytes());
+            put(&mut v, &(-(i as f32)).to_le_bytes());
+            put(&mut v, &(i as i16).to_le_bytes());
+            v.push(0);
+            v.push(51);
+            put(&mut v, &0.25f32.to_le_bytes());
+        }
+        for face in [[0i32, 1, 2], [2, 1, 0]] {
+            v.push(3);
+            for k in face {
+                put(&mut v, &k.to_le_bytes());
+            }
+        }
+        v
+    }
+
+    #[test]
+    fn binary_any_order_both_endians() {
+        let d = tempfile::tempdir().unwrap();
+        for be in [false, true] {
+            let p = write(d.path(), "a.ply", &binary_ply(be, 10));
+            let r = PlyReader::open(&p).unwrap();
+            assert_eq!(r.len(), 10);
+            assert!(r.attributes().color && r.attributes().confidence && !r.attributes().normal);
+            let b = read_all(&r, 3);
+            assert_eq!(b.len(), 10);
+            assert_eq!(b.pos[4], [4.0, -4.0, 2.0]);
+            assert_eq!(b.color[4], [65535, 0, 51 * 257, 65535]);
+            assert_eq!(b.confidence[9], 0.25);
+        }
+    }
+
+    #[test]
+    fn every_prefix_fails_cleanly() {
+        let d = tempfile::tempdir().unwrap();
+        let full = binary_ply(false, 4);
+        for len in 0..full.len() {
+            let p = write(d.path(), "t.ply", &full[..len]);
+            let e = match crate::io::open(&p) {
+                Ok(_) => panic!("prefix of {len} bytes opened"),
+                Err(e) => e.to_string(),
+            };
+            assert!(e.contains("t.ply"), "{e}");
+        }
+        let p = write(d.path(), "t.ply", &full);
+        assert!(crate::io::open(&p).is_ok());
+    }
+
+    #[test]
+    fn ascii_with_element_before_vertex() {
+        let d = tempfile::tempdir().unwrap();
+        let mut s = String::from(
+            "ply\r\nformat ascii 1.0\r\ncomment hi\r\nelement cam 2\r\nproperty float a\r\nelement vertex 5\r\nproperty float x\r\nproperty float y\r\nproperty float z\r\nproperty float nx\r\nproperty float ny\r\nproperty float nz\r\nelement range_grid 3\r\nproperty list uchar int vertex_indices\r\nend_header\r\n1\r\n2\r\n",
+        );
+        for i in 0..5 {
+            s += &format!("{i} 1 2 0 0 1\r\n");
+        }
+        s += "0\n1 3\n0\n";
+        let p = write(d.path(), "a.ply", s.as_bytes());
+        let r = PlyReader::open(&p).unwrap();
+        assert_eq!(r.format(), Format::PlyAscii);
+        let b = read_all(&r, 2);
+        assert_eq!(b.len(), 5);
+        assert_eq!(b.pos[3], [3.0, 1.0, 2.0]);
+        assert_eq!(b.normal[3], [0.0, 0.0, 1.0]);
+    }
+
+    #[test]
+    fn ascii_nan_names_element_and_line() {
+        let d = tempfile::tempdir().unwrap();
+        let s = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nend_header\n0 0 0\n1 nan 0\n2 2 2\n";
+        let p = write(d.path(), "n.ply", s.as_bytes());
+        let r = PlyReader::open(&p).unwrap();
+        let c = r.chunks(100).unwrap();
+        let mut b = PointBatch::default();
+        let e = r.read_chunk(&c[0], false, &mut b).unwrap_err().to_string();
+        assert!(
+            e.contains("element 1 (line 9)") && e.contains("y is NaN"),
+            "{e}"
+        );
+        let mut b = PointBatch::default();
+        let st = r.read_chunk(&c[0], true, &mut b).unwrap();
+        assert_eq!((st.skipped_invalid, b.len()), (1, 2));
+    }
+
+    #[test]
+    fn header_errors() {
+        let d = tempfile::tempdir().unwrap();
+        let cases: &[(&str, &str)] = &[
+            (
+                "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\n",
+                "no end_header",
+            ),
+            (
+                "ply\nformat ascii 1.0\nelement vertex 1\nproperty list uchar int x\nend_header\n",
+                "list property",
+            ),
+            (
+                "ply\nformat ascii 1.0\nelement vertex 1\nproperty float128 x\nend_header\n",
+                "unknown property type",
+            ),
+            (
+                "ply\nformat ascii 1.0\nelement vertex 1\nproperty float y\nproperty float z\nend_header\n0 0\n",
+                "no x property",
+            ),
+            (
+                "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nend_header\n0 0 0\n",
+                "promises 3 vertices",
+            ),
+            ("ply\nformat xml 1.0\nend_header\n", "unknown PLY format"),
+            ("plx\n", "not a PLY"),
+        ];
+        for (text, want) in cases {
+            let p = write(d.path(), "h.ply", text.as_bytes());
+            let e = PlyReader::open(&p)
+                .err()
+                .map(|e| e.to_string())
+                .unwrap_or_default();
+            assert!(e.contains(want) && e.contains("h.ply"), "{text:?}: {e}");
+        }
+    }
+
+    #[test]
+    fn zero_vertices_is_empty() {
+        let d = tempfile::tempdir().unwrap();
+        let p = write(
+            d.path(),
+            "z.ply",
+            b"ply\nformat binary_little_endian 1.0\nelement vertex 0\nproperty float x\nproperty float y\nproperty float z\nend_header\n",
+        );
+        let r = PlyReader::open(&p).unwrap();
+        assert!(r.is_empty());
+        assert!(r.chunks(10).unwrap().is_empty());
+    }
+}

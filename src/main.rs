@@ -1,0 +1,414 @@
+//! The `scanflow` command line: parse, set up progress and logging, call the library.
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use clap::{Args, Parser, Subcommand};
+
+use scanflow::exec::progress::{Mode, Progress};
+use scanflow::exec::{Ctx, default_mem_bytes, human_bytes, parse_mem, peak_rss_bytes};
+use scanflow::io::InputSpec;
+use scanflow::store::{IngestParams, Store};
+
+/// Out-of-core streaming surface reconstruction for huge 3D scans.
+#[derive(Parser, Debug)]
+#[command(name = "scanflow", version, about, propagate_version = true)]
+struct Cli {
+    #[command(subcommand)]
+    cmd: Cmd,
+}
+
+#[derive(Args, Debug, Clone)]
+struct Common {
+    /// Worker threads (default: one per core).
+    #[arg(long, global = true, default_value_t = 0)]
+    threads: usize,
+    /// Memory budget: 512M, 4G, 50% of available; default half the available memory.
+    #[arg(long, global = true)]
+    mem: Option<String>,
+    /// Progress display: auto (bars on a terminal, JSON lines otherwise), bars, json, none.
+    #[arg(long, global = true, default_value = "auto")]
+    progress: String,
+}
+
+#[derive(Subcommand, Debug)]
+enum Cmd {
+    /// Write oriented samples of a synthetic shape, with its exact description (.truth.json).
+    Synth {
+        /// sphere, torus, twosheets or bumpy.
+        shape: String,
+        /// Number of points.
+        #[arg(long)]
+        points: u64,
+        /// Gaussian noise, relative to the bounding-box diagonal.
+        #[arg(long, default_value_t = 0.0)]
+        noise: f64,
+        /// Random seed.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Output PLY.
+        #[arg(short, long)]
+        output: PathBuf,
+        #[command(flatten)]
+        common: Common,
+    },
+    /// Bucket point files into an on-disk octree store.
+    Ingest {
+        /// Point files (PLY, LAS/LAZ, XYZ/PTS).
+        inputs: Vec<PathBuf>,
+        /// Output store directory (must not exist).
+        #[arg(short, long)]
+        output: PathBuf,
+        /// Scanalyze .conf listing scans and their transforms.
+        #[arg(long)]
+        conf: Option<PathBuf>,
+        /// Split cells until they hold at most this many points.
+        #[arg(long, default_value_t = 1_000_000)]
+        max_cell_points: u64,
+        /// Drop points with NaN/infinite coordinates (counted) instead of failing.
+        #[arg(long)]
+        skip_invalid: bool,
+        /// zstd level of cell files (-7 fastest .. 19 smallest).
+        #[arg(long, default_value_t = -1, allow_negative_numbers = true)]
+        zstd_level: i32,
+        #[command(flatten)]
+        common: Common,
+    },
+    /// Describe a point file or a store.
+    Info {
+        /// A point file or a store directory.
+        path: PathBuf,
+        /// Print JSON instead of text.
+        #[arg(long)]
+        json: bool,
+        #[command(flatten)]
+        common: Common,
+    },
+    /// The main job on an embedded default: synthesise a scan, ingest it, describe the store.
+    Demo {
+        /// Output directory.
+        #[arg(short, long, default_value = "scanflow-demo")]
+        output: PathBuf,
+        /// Points to synthesise.
+        #[arg(long, default_value_t = 1_000_000)]
+        points: u64,
+        #[command(flatten)]
+        common: Common,
+    },
+}
+
+struct Logger;
+
+static LOGGER: Logger = Logger;
+
+impl log::Log for Logger {
+    fn enabled(&self, m: &log::Metadata) -> bool {
+        m.level() <= log::Level::Info
+    }
+    fn log(&self, r: &log::Record) {
+        if self.enabled(r.metadata()) {
+            let level = match r.level() {
+                log::Level::Error => "error",
+                log::Level::Warn => "warning",
+                _ => "info",
+            };
+            eprintln!("scanflow: {level}: {}", r.args());
+        }
+    }
+    fn flush(&self) {}
+}
+
+fn main() -> ExitCode {
+    let _ = log::set_logger(&LOGGER).map(|()| log::set_max_level(log::LevelFilter::Info));
+    let cli = Cli::parse();
+    match run(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("scanflow: error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn ctx(c: &Common) -> Result<Ctx> {
+    let mem = match &c.mem {
+        Some(s) => parse_mem(s)?,
+        None => default_mem_bytes(),
+    };
+    let mode = match c.progress.as_str() {
+        "auto" => Mode::detect(),
+        "bars" => Mode::Bars,
+        "json" => Mode::Json {
+            every: std::time::Duration::from_secs(5),
+        },
+        "none" => Mode::Quiet,
+        other => anyhow::bail!("--progress \"{other}\": expected auto, bars, json or none"),
+    };
+    Ok(Ctx::new(c.threads, mem, Progress::new(mode))?)
+}
+
+fn run(cli: Cli) -> Result<()> {
+    match cli.cmd {
+        Cmd::Synth {
+            shape,
+            points,
+            noise,
+            seed,
+            output,
+            common,
+        } => {
+            let ctx = ctx(&common)?;
+            let report = synth(&ctx, &shape, points, noise, seed, &output)?;
+            println!(
+                "wrote {} points of {} to {} in {:.2} s",
+                report.points,
+                shape,
+                output.display(),
+                report.secs
+            );
+        }
+        Cmd::Ingest {
+            inputs,
+            output,
+            conf,
+            max_cell_points,
+            skip_invalid,
+            zstd_level,
+            common,
+        } => {
+            if !(-7..=19).contains(&zstd_level) {
+                anyhow::bail!("--zstd-level {zstd_level}: expected -7 ..= 19");
+            }
+            let ctx = ctx(&common)?;
+            let specs = input_specs(&inputs, conf.as_deref())?;
+            let params = IngestParams {
+                max_cell_points,
+                skip_invalid,
+                zstd_level,
+                ..Default::default()
+            };
+            let st = scanflow::store::ingest(&specs, &output, &params, &ctx)?;
+            println!(
+                "ingested {} points ({} skipped as invalid) into {} cells of {} in {:.2} s: {:.2} M points/s, store {}, peak memory {}",
+                st.points,
+                st.skipped_invalid,
+                st.cells,
+                output.display(),
+                st.secs,
+                st.points as f64 / st.secs / 1e6,
+                human_bytes(st.store_bytes),
+                human_bytes(peak_rss_bytes())
+            );
+        }
+        Cmd::Info { path, json, common } => {
+            let ctx = ctx(&common)?;
+            info(&ctx, &path, json)?;
+        }
+        Cmd::Demo {
+            output,
+            points,
+            common,
+        } => {
+            let ctx = ctx(&common)?;
+            let t0 = Instant::now();
+            std::fs::create_dir_all(&output).with_context(|| {
+                format!("{}: cannot create the demo directory", output.display())
+            })?;
+            let ply = output.join("demo_points.ply");
+            let store = output.join("demo.store");
+            for p in [&ply, &store] {
+                if p.is_dir() {
+                    std::fs::remove_dir_all(p).with_context(|| {
+                        format!("{}: cannot remove the old demo output", p.display())
+                    })?;
+                } else if p.exists() {
+                    std::fs::remove_file(p).with_context(|| {
+                        format!("{}: cannot remove the old demo output", p.display())
+                    })?;
+                }
+            }
+            let rep = synth(&ctx, "bumpy", points, 0.001, 1, &ply)?;
+            println!(
+                "synthesised {} points of a bumpy sphere in {:.2} s",
+                rep.points, rep.secs
+            );
+            let st = scanflow::store::ingest(
+                &[InputSpec::plain(&ply)],
+                &store,
+                &IngestParams {
+                    // Small cells, so that the demo shows an octree rather than one cell.
+                    max_cell_points: 100_000,
+                    ..Default::default()
+                },
+                &ctx,
+            )?;
+            println!(
+                "ingested into {} ({} cells) in {:.2} s: {:.2} M points/s",
+                store.display(),
+                st.cells,
+                st.secs,
+                st.points as f64 / st.secs / 1e6
+            );
+            info(&ctx, &store, false)?;
+            println!(
+                "demo done in {:.2} s, peak memory {}",
+                t0.elapsed().as_secs_f64(),
+                human_bytes(peak_rss_bytes())
+            );
+        }
+    }
+    Ok(())
+}
+
+fn synth(
+    ctx: &Ctx,
+    shape: &str,
+    points: u64,
+    noise: f64,
+    seed: u64,
+    out: &Path,
+) -> Result<scanflow::synth::SynthReport> {
+    let params = scanflow::synth::SynthParams {
+        shape: shape.parse()?,
+        points,
+        noise,
+        seed,
+        threads: ctx.threads(),
+    };
+    let stage = ctx.progress.stage("synth", Some(points), "points");
+    let mut last = 0;
+    let r = scanflow::synth::synth(&params, out, &mut |done| {
+        stage.inc(done - last);
+        last = done;
+    })?;
+    stage.finish(None);
+    Ok(r)
+}
+
+fn input_specs(inputs: &[PathBuf], conf: Option<&Path>) -> Result<Vec<InputSpec>> {
+    let mut specs = Vec::new();
+    if let Some(c) = conf {
+        specs.extend(scanflow::io::conf::read_conf(c)?);
+    }
+    specs.extend(inputs.iter().map(InputSpec::plain));
+    if specs.is_empty() {
+        anyhow::bail!("no input: give point files, a store, or --conf FILE");
+    }
+    Ok(specs)
+}
+
+fn info(ctx: &Ctx, path: &Path, json: bool) -> Result<()> {
+    if path.is_dir() {
+        let store = Store::open(path)?;
+        let m = &store.manifest;
+        // Histogram of cell sizes in powers of two.
+        let mut hist: std::collections::BTreeMap<u32, usize> = Default::default();
+        for c in &m.cells {
+            *hist.entry(64 - c.count.leading_zeros()).or_default() += 1;
+        }
+        let mut levels: std::collections::BTreeMap<u32, usize> = Default::default();
+        for c in &m.cells {
+            *levels.entry(c.level).or_default() += 1;
+        }
+        let bytes: u64 = m.cells.iter().map(|c| c.bytes).sum();
+        if json {
+            let v = serde_json::json!({
+                "kind": "store",
+                "path": path.display().to_string(),
+                "points": m.point_count,
+                "skipped_invalid": m.skipped_invalid,
+                "attributes": m.attributes.names(),
+                "bounds": m.bounds,
+                "cells": m.cells.len(),
+                "store_bytes": bytes,
+                "cells_by_level": levels,
+                "cell_size_histogram": hist.iter().map(|(b, n)| serde_json::json!({"min_points": if *b == 0 {0} else {1u64 << (b - 1)}, "max_points": (1u64 << b) - 1, "cells": n})).collect::<Vec<_>>(),
+                "inputs": m.inputs,
+            });
+            println!("{v}");
+            return Ok(());
+        }
+        println!("store       {}", path.display());
+        println!("points      {}", m.point_count);
+        if m.skipped_invalid > 0 {
+            println!("skipped     {} invalid points", m.skipped_invalid);
+        }
+        println!("attributes  {}", m.attributes.names().join(" "));
+        println!(
+            "bounds      [{:.6}, {:.6}, {:.6}] .. [{:.6}, {:.6}, {:.6}]",
+            m.bounds.min[0],
+            m.bounds.min[1],
+            m.bounds.min[2],
+            m.bounds.max[0],
+            m.bounds.max[1],
+            m.bounds.max[2]
+        );
+        println!("inputs      {}", m.inputs.len());
+        println!(
+            "cells       {} ({}, {:.2} bytes/point)",
+            m.cells.len(),
+            human_bytes(bytes),
+            bytes as f64 / m.point_count.max(1) as f64
+        );
+        println!(
+            "levels      {}",
+            levels
+                .iter()
+                .map(|(l, n)| format!("L{l}:{n}"))
+                .collect::<Vec<_>>()
+                .join(" ")
+        );
+        println!("cell sizes (points per cell):");
+        let most = hist.values().copied().max().unwrap_or(1);
+        for (b, n) in &hist {
+            let lo = if *b == 0 { 0 } else { 1u64 << (b - 1) };
+            let hi = (1u64 << b) - 1;
+            println!(
+                "  {:>10} .. {:<10} {:>6} {}",
+                lo,
+                hi,
+                n,
+                "#".repeat((n * 40).div_ceil(most))
+            );
+        }
+        return Ok(());
+    }
+    let fi = scanflow::store::file_info(path, ctx)?;
+    if json {
+        println!("{}", serde_json::to_string(&fi)?);
+        return Ok(());
+    }
+    println!("file        {}", fi.path);
+    println!("format      {}", fi.format.name());
+    println!("points      {}", fi.points);
+    println!("attributes  {}", fi.attributes.join(" "));
+    println!(
+        "bounds      [{:.6}, {:.6}, {:.6}] .. [{:.6}, {:.6}, {:.6}]",
+        fi.bounds.min[0],
+        fi.bounds.min[1],
+        fi.bounds.min[2],
+        fi.bounds.max[0],
+        fi.bounds.max[1],
+        fi.bounds.max[2]
+    );
+    if fi.invalid_points > 0 {
+        println!(
+            "invalid     {} points with NaN/infinite coordinates",
+            fi.invalid_points
+        );
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cli_is_consistent() {
+        use clap::CommandFactory;
+        Cli::command().debug_assert();
+    }
+}

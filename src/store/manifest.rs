@@ -1,0 +1,144 @@
+//! `manifest.json`: what a store holds. Written last, so a store with a manifest is complete.
+
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Error, IoContext, Result};
+use crate::io::Format;
+use crate::types::{Aabb, Attributes, CellKey, Cube, Rigid};
+
+/// The `format` field of every store manifest.
+pub const STORE_FORMAT: &str = "scanflow-store";
+/// The store layout version this build reads and writes.
+pub const STORE_VERSION: u32 = 1;
+/// File name of the manifest inside a store.
+pub const MANIFEST: &str = "manifest.json";
+
+/// The manifest of a store.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Manifest {
+    /// Always [`STORE_FORMAT`].
+    pub format: String,
+    /// Layout version ([`STORE_VERSION`]).
+    pub version: u32,
+    /// Points stored.
+    pub point_count: u64,
+    /// Points dropped for non-finite coordinates (`--skip-invalid`).
+    pub skipped_invalid: u64,
+    /// Attributes of every record.
+    pub attributes: Attributes,
+    /// Bytes per record.
+    pub record_bytes: usize,
+    /// Record fields in order, with types (see `cell_file`).
+    pub record_fields: Vec<String>,
+    /// Cell file compression.
+    pub compression: String,
+    /// Exact bounds of the stored points (world frame, input units).
+    pub bounds: Aabb,
+    /// The octree's root cube.
+    pub cube: Cube,
+    /// Cell point limit the store was built with.
+    pub max_cell_points: u64,
+    /// Levels of the counting grid.
+    pub count_levels: u32,
+    /// The inputs, in order.
+    pub inputs: Vec<InputEntry>,
+    /// Non-empty cells in key order.
+    pub cells: Vec<CellEntry>,
+}
+
+/// One input file.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct InputEntry {
+    /// Path as given.
+    pub path: String,
+    /// Format read.
+    pub format: Format,
+    /// Points in the file.
+    pub points: u64,
+    /// Transform applied.
+    pub transform: Rigid,
+}
+
+/// One cell.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CellEntry {
+    /// Key (level sentinel bit plus Morton code).
+    pub key: CellKey,
+    /// Octree level.
+    pub level: u32,
+    /// Integer coordinates at that level.
+    pub coords: [u32; 3],
+    /// Points.
+    pub count: u64,
+    /// Bounds of its points.
+    pub bounds: Aabb,
+    /// File name inside `cells/`.
+    pub file: String,
+    /// Compressed size in bytes.
+    pub bytes: u64,
+    /// CRC-32 (IEEE) of the file.
+    pub crc32: u32,
+}
+
+impl Manifest {
+    /// Read and check a manifest.
+    pub fn load(store: &Path) -> Result<Manifest> {
+        let path = store.join(MANIFEST);
+        if !store.is_dir() {
+            return Err(Error::input(
+                store,
+                "not a scanflow store (not a directory)",
+            ));
+        }
+        let text = std::fs::read_to_string(&path).map_err(|e| {
+            if e.kind() == std::io::ErrorKind::NotFound {
+                Error::input(
+                    store,
+                    "not a complete scanflow store: it has no manifest.json (an interrupted ingest leaves none)",
+                )
+            } else {
+                Error::io(&path, e)
+            }
+        })?;
+        let v: serde_json::Value = serde_json::from_str(&text).map_err(|e| {
+            Error::format(
+                &path,
+                crate::error::Location::Line(e.line() as u64),
+                format!("invalid JSON: {e}"),
+            )
+        })?;
+        if v.get("format").and_then(|f| f.as_str()) != Some(STORE_FORMAT) {
+            return Err(Error::input(&path, "not a scanflow store manifest"));
+        }
+        let version = v.get("version").and_then(|f| f.as_u64()).unwrap_or(0);
+        if version != STORE_VERSION as u64 {
+            return Err(Error::input(
+                &path,
+                format!(
+                    "store format version {version}, but this scanflow reads version {STORE_VERSION}; re-run ingest"
+                ),
+            ));
+        }
+        serde_json::from_value(v).map_err(|e| {
+            Error::input(
+                &path,
+                format!("manifest does not match version {STORE_VERSION}: {e}"),
+            )
+        })
+    }
+
+    /// Write to `dir/manifest.json`, synced.
+    pub fn save(&self, dir: &Path) -> Result<()> {
+        let path = dir.join(MANIFEST);
+        let text = serde_json::to_string_pretty(self)
+            .map_err(|e| Error::Internal(format!("manifest serialisation: {e}")))?;
+        let mut f = std::fs::File::create(&path).with_path(&path)?;
+        use std::io::Write;
+        f.write_all(text.as_bytes()).with_path(&path)?;
+        f.write_all(b"\n").with_path(&path)?;
+        f.sync_all().with_path(&path)?;
+        Ok(())
+    }
+}

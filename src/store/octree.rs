@@ -1,0 +1,161 @@
+//! The cell hierarchy chosen from a counting grid.
+//!
+//! Points are first counted on a regular grid of `8^L` cells below a base cell (the root at
+//! ingest, an oversized cell when splitting again), indexed in Morton order so that the
+//! eight children of a node are consecutive. The hierarchy is then cut top-down: a node that
+//! holds at most `max_points` points becomes a leaf (a cell of the store); a fuller node is
+//! split into its non-empty children. A grid cell that is still too full becomes an
+//! *oversized* leaf, to be split again by a finer count of its own points. Leaves come out in
+//! Morton order, each covering a contiguous range of grid cells, so the leaf of a point is a
+//! binary search over the range starts.
+
+use crate::types::CellKey;
+
+/// A leaf of the hierarchy.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Leaf {
+    /// The cell.
+    pub key: CellKey,
+    /// Points counted in it.
+    pub count: u64,
+    /// First grid cell (Morton index at the counting level, relative to the base).
+    pub start: u64,
+    /// One past the last grid cell.
+    pub end: u64,
+    /// More points than the limit, yet at the counting level: split again later.
+    pub oversized: bool,
+}
+
+/// Leaves over a counting grid.
+#[derive(Debug, Clone)]
+pub struct Hierarchy {
+    /// The cell the grid subdivides.
+    pub base: CellKey,
+    /// Grid levels below the base.
+    pub levels: u32,
+    /// Non-empty leaves in Morton order.
+    pub leaves: Vec<Leaf>,
+    starts: Vec<u64>,
+}
+
+impl Hierarchy {
+    /// Cut the hierarchy from `counts` (length `8^levels`, Morton order).
+    pub fn build(base: CellKey, levels: u32, counts: &[u64], max_points: u64) -> Hierarchy {
+        debug_assert_eq!(counts.len() as u64, 1u64 << (3 * levels));
+        // sums[r] holds the counts of the 8^r nodes at relative level r.
+        let mut sums: Vec<Vec<u64>> = vec![Vec::new(); levels as usize + 1];
+        sums[levels as usize] = counts.to_vec();
+        for r in (0..levels as usize).rev() {
+            let child = &sums[r + 1];
+            sums[r] = child.chunks_exact(8).map(|c| c.iter().sum()).collect();
+        }
+        let mut leaves = Vec::new();
+        // Depth-first in Morton order with an explicit stack of (level, morton).
+        let mut stack = vec![(0u32, 0u64)];
+        while let Some((r, m)) = stack.pop() {
+            let n = sums[r as usize][m as usize];
+            if n == 0 {
+                continue;
+            }
+            if n <= max_points || r == levels {
+                let shift = 3 * (levels - r);
+                leaves.push(Leaf {
+                    key: CellKey((base.0 << (3 * r)) | m),
+                    count: n,
+                    start: m << shift,
+                    end: (m + 1) << shift,
+                    oversized: n > max_points,
+                });
+            } else {
+                for c in (0..8).rev() {
+                    stack.push((r + 1, m * 8 + c));
+                }
+            }
+        }
+        let starts = leaves.iter().map(|l| l.start).collect();
+        Hierarchy {
+            base,
+            levels,
+            leaves,
+            starts,
+        }
+    }
+
+    /// The leaf holding grid cell `m`, if any.
+    #[inline]
+    pub fn leaf_of(&self, m: u64) -> Option<u32> {
+        let i = self.starts.partition_point(|&s| s <= m);
+        if i == 0 {
+            return None;
+        }
+        let l = &self.leaves[i - 1];
+        (m < l.end).then_some((i - 1) as u32)
+    }
+}
+
+/// Levels of a counting grid for `n` points spread on surfaces (about `4^L` occupied cells of
+/// `8^L`): enough that a typical grid cell holds a sixteenth of the limit, at most `max_levels`.
+pub fn count_levels(n: u64, max_points: u64, max_levels: u32) -> u32 {
+    let mut l = 1;
+    while l < max_levels && (n as f64) / 4f64.powi(l as i32) > max_points as f64 / 16.0 {
+        l += 1;
+    }
+    l
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cuts_and_finds() {
+        // 2 levels: 64 grid cells. Put 10 points in cell 0, 1 in cells 8..16, 3 in cell 63.
+        let mut c = vec![0u64; 64];
+        c[0] = 10;
+        for v in &mut c[8..16] {
+            *v = 1;
+        }
+        c[63] = 3;
+        let h = Hierarchy::build(CellKey::ROOT, 2, &c, 8);
+        // Root (21) splits; child 0 (10) splits to grid cell 0 (oversized); child 1 (8) leaf;
+        // child 7 (3) leaf.
+        let keys: Vec<_> = h
+            .leaves
+            .iter()
+            .map(|l| (l.key.decode(), l.count, l.oversized))
+            .collect();
+        assert_eq!(
+            keys,
+            vec![
+                ((2, [0, 0, 0]), 10, true),
+                ((1, [1, 0, 0]), 8, false),
+                ((1, [1, 1, 1]), 3, false),
+            ]
+        );
+        assert_eq!(h.leaf_of(0), Some(0));
+        assert_eq!(h.leaf_of(1), None);
+        assert_eq!(h.leaf_of(12), Some(1));
+        assert_eq!(h.leaf_of(63), Some(2));
+        assert_eq!(h.leaf_of(60), Some(2));
+        assert_eq!(h.leaf_of(20), None);
+    }
+
+    #[test]
+    fn relative_keys_below_a_base() {
+        let base = CellKey::new(3, [1, 2, 3]);
+        let mut c = vec![0u64; 8];
+        c[5] = 4;
+        c[6] = 4;
+        let h = Hierarchy::build(base, 1, &c, 5);
+        assert_eq!(h.leaves.len(), 2);
+        assert_eq!(h.leaves[0].key, base.child(5));
+        assert_eq!(h.leaves[0].key.decode(), (4, [3, 4, 7]));
+    }
+
+    #[test]
+    fn levels_grow_with_points() {
+        assert_eq!(count_levels(1000, 1_000_000, 7), 1);
+        assert!(count_levels(100_000_000, 1_000_000, 7) >= 5);
+        assert_eq!(count_levels(u64::MAX / 2, 1, 7), 7);
+    }
+}

@@ -1,0 +1,249 @@
+//! Scatter: points grouped by leaf, appended to per-leaf buffers, flushed as zstd frames.
+//!
+//! Determinism: chunks are grouped in parallel but appended in chunk order, and the flush
+//! policy depends only on the sequence of appends, so a cell file's bytes do not depend on
+//! the number of threads. Buffers are compressed in parallel, each cut into frames of about
+//! [`FRAME_BYTES`] so that one big buffer still keeps every worker busy; frames are written in
+//! a fixed order.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use rayon::prelude::*;
+
+use crate::error::{Error, IoContext, Result};
+use crate::store::cell_file::RecordLayout;
+use crate::types::{Aabb, CellKey, PointBatch};
+
+/// Uncompressed size of a frame, in bytes (rounded down to whole records).
+pub const FRAME_BYTES: usize = 2 << 20;
+
+/// One chunk's records, grouped by leaf.
+#[derive(Debug, Default)]
+pub struct Grouped {
+    /// Records, leaf by leaf.
+    pub bytes: Vec<u8>,
+    /// `(leaf, byte start, byte end, count, bounds)` per non-empty leaf, by leaf id.
+    pub groups: Vec<(u32, usize, usize, u64, Aabb)>,
+}
+
+/// Group the points of `b` by leaf (`leaf[i] < leaves` for point `i`), keeping input order
+/// within a leaf: a counting sort, so linear in points plus leaves.
+pub fn group(
+    b: &PointBatch,
+    leaf: &[u32],
+    leaves: usize,
+    layout: &RecordLayout,
+    out: &mut Grouped,
+) {
+    out.groups.clear();
+    let stride = layout.stride;
+    let mut start = vec![0usize; leaves + 1];
+    for &l in leaf {
+        start[l as usize + 1] += 1;
+    }
+    for l in 0..leaves {
+        if start[l + 1] > 0 {
+            out.groups
+                .push((l as u32, 0, 0, start[l + 1] as u64, Aabb::EMPTY));
+        }
+        start[l + 1] += start[l];
+    }
+    for g in &mut out.groups {
+        g.1 = start[g.0 as usize] * stride;
+        g.2 = g.1 + g.3 as usize * stride;
+    }
+    out.bytes.clear();
+    out.bytes.resize(leaf.len() * stride, 0);
+    let mut next = start;
+    for (i, &l) in leaf.iter().enumerate() {
+        let slot = next[l as usize];
+        next[l as usize] += 1;
+        layout.encode_into(b, i, &mut out.bytes[slot * stride..(slot + 1) * stride]);
+    }
+    // Bounds per group, from the records' positions in place.
+    for g in &mut out.groups {
+        for r in out.bytes[g.1..g.2].chunks_exact(stride) {
+            let f = |o: usize| {
+                let mut a = [0u8; 8];
+                a.copy_from_slice(&r[o..o + 8]);
+                f64::from_le_bytes(a)
+            };
+            g.4.add([f(0), f(8), f(16)]);
+        }
+    }
+}
+
+/// State of one output cell.
+#[derive(Debug)]
+pub struct CellOut {
+    /// The cell.
+    pub key: CellKey,
+    /// Its file.
+    pub file: PathBuf,
+    /// Records written or buffered.
+    pub count: u64,
+    /// Bounds of its points.
+    pub bounds: Aabb,
+    /// Compressed bytes written.
+    pub bytes: u64,
+    crc: crc32fast::Hasher,
+    buf: Vec<u8>,
+}
+
+impl CellOut {
+    /// CRC-32 of the file as written so far.
+    pub fn crc32(&self) -> u32 {
+        self.crc.clone().finalize()
+    }
+}
+
+/// The scatter of one hierarchy's leaves.
+pub struct Scatter {
+    layout: RecordLayout,
+    cells: Vec<CellOut>,
+    buffered: usize,
+    cap: usize,
+    zstd_level: i32,
+}
+
+impl Scatter {
+    /// Cells `keys` under `dir`, buffering at most `cap_bytes` before flushing.
+    pub fn new(
+        dir: &Path,
+        keys: &[CellKey],
+        layout: RecordLayout,
+        cap_bytes: usize,
+        zstd_level: i32,
+    ) -> Result<Scatter> {
+        let mut cells = Vec::with_capacity(keys.len());
+        for &key in keys {
+            let file = dir.join(format!("{}.zst", key.file_name()));
+            // Create (truncate) now, so that a cell's file exists even before its first frame.
+            std::fs::File::create(&file).with_path(&file)?;
+            cells.push(CellOut {
+                key,
+                file,
+                count: 0,
+                bounds: Aabb::EMPTY,
+                bytes: 0,
+                crc: crc32fast::Hasher::new(),
+                buf: Vec::new(),
+            });
+        }
+        Ok(Scatter {
+            layout,
+            cells,
+            buffered: 0,
+            cap: cap_bytes.max(FRAME_BYTES),
+            zstd_level,
+        })
+    }
+
+    /// Append one chunk's groups (chunks must come in input order).
+    pub fn push(&mut self, pool: &rayon::ThreadPool, g: &Grouped) -> Result<()> {
+        for &(l, s, e, n, bounds) in &g.groups {
+            let c = self
+                .cells
+                .get_mut(l as usize)
+                .ok_or_else(|| Error::Internal(format!("leaf {l} out of range")))?;
+            c.buf.extend_from_slice(&g.bytes[s..e]);
+            c.count += n;
+            c.bounds = c.bounds.union(&bounds);
+            self.buffered += e - s;
+        }
+        if self.buffered > self.cap {
+            self.flush(pool, self.cap / 2)?;
+        }
+        Ok(())
+    }
+
+    /// Flush the fullest buffers until at most `target` bytes stay buffered.
+    fn flush(&mut self, pool: &rayon::ThreadPool, target: usize) -> Result<()> {
+        let mut by_size: Vec<usize> = (0..self.cells.len())
+            .filter(|&i| !self.cells[i].buf.is_empty())
+            .collect();
+        by_size.sort_by_key(|&i| (std::cmp::Reverse(self.cells[i].buf.len()), i));
+        let mut chosen = Vec::new();
+        for i in by_size {
+            if self.buffered <= target {
+                break;
+            }
+            self.buffered -= self.cells[i].buf.len();
+            chosen.push(i);
+        }
+        chosen.sort_unstable();
+        // Cut each chosen buffer into frames; compress all frames in parallel.
+        let frame = (FRAME_BYTES / self.layout.stride).max(1) * self.layout.stride;
+        let bufs: Vec<(usize, Vec<u8>)> = chosen
+            .iter()
+            .map(|&i| (i, std::mem::take(&mut self.cells[i].buf)))
+            .collect();
+        let jobs: Vec<(usize, &[u8])> = bufs
+            .iter()
+            .flat_map(|(i, b)| b.chunks(frame).map(move |f| (*i, f)))
+            .collect();
+        let level = self.zstd_level;
+        let frames: Vec<(usize, std::io::Result<Vec<u8>>)> = pool.install(|| {
+            jobs.par_iter()
+                .map(|&(i, f)| (i, zstd::bulk::compress(f, level)))
+                .collect()
+        });
+        let mut open: Option<(usize, std::io::BufWriter<std::fs::File>)> = None;
+        for (i, z) in frames {
+            let z = z.map_err(|e| Error::Internal(format!("zstd compression failed: {e}")))?;
+            if open.as_ref().map(|o| o.0) != Some(i) {
+                if let Some((j, mut w)) = open.take() {
+                    w.flush().with_path(&self.cells[j].file)?;
+                }
+                let c = &self.cells[i];
+                let f = std::fs::OpenOptions::new()
+                    .append(true)
+                    .open(&c.file)
+                    .with_path(&c.file)?;
+                open = Some((i, std::io::BufWriter::with_capacity(1 << 20, f)));
+            }
+            let c = &mut self.cells[i];
+            if let Some((_, w)) = open.as_mut() {
+                w.write_all(&z).with_path(&c.file)?;
+            }
+            c.crc.update(&z);
+            c.bytes += z.len() as u64;
+        }
+        if let Some((j, mut w)) = open.take() {
+            w.flush().with_path(&self.cells[j].file)?;
+        }
+        Ok(())
+    }
+
+    /// Flush everything and return the cells.
+    pub fn finish(mut self, pool: &rayon::ThreadPool) -> Result<Vec<CellOut>> {
+        self.flush(pool, 0)?;
+        Ok(self.cells)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::types::Attributes;
+
+    #[test]
+    fn groups_keep_input_order() {
+        let layout = RecordLayout::new(Attributes::default());
+        let b = PointBatch {
+            pos: (0..6).map(|i| [i as f64, 0.0, 0.0]).collect(),
+            ..Default::default()
+        };
+        let mut g = Grouped::default();
+        group(&b, &[2, 0, 2, 1, 0, 2], 3, &layout, &mut g);
+        let leaves: Vec<(u32, u64)> = g.groups.iter().map(|x| (x.0, x.3)).collect();
+        assert_eq!(leaves, vec![(0, 2), (1, 1), (2, 3)]);
+        let mut d = PointBatch::default();
+        layout.decode(&g.bytes[g.groups[2].1..g.groups[2].2], &mut d);
+        assert_eq!(
+            d.pos.iter().map(|p| p[0]).collect::<Vec<_>>(),
+            vec![0.0, 2.0, 5.0]
+        );
+    }
+}

@@ -1,0 +1,90 @@
+//! Helpers: run the binary, make fixtures in temp dirs.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+/// The scanflow binary built for these tests.
+pub fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_scanflow"))
+}
+
+/// Run scanflow with `args`; return the output.
+pub fn run(args: &[&str]) -> Output {
+    bin().args(args).output().expect("the scanflow binary runs")
+}
+
+/// Run and require success; return stdout.
+pub fn ok(args: &[&str]) -> String {
+    let o = run(args);
+    assert!(
+        o.status.success(),
+        "scanflow {args:?} failed:\n{}\n{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+/// Run, require a clean failure (exit 1, no panic), return stderr.
+pub fn fails(args: &[&str]) -> String {
+    let o = run(args);
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert_eq!(
+        o.status.code(),
+        Some(1),
+        "scanflow {args:?} should fail with 1:\n{err}"
+    );
+    assert!(
+        !err.contains("panicked"),
+        "scanflow {args:?} panicked:\n{err}"
+    );
+    assert!(err.contains("scanflow: error:"), "{err}");
+    err
+}
+
+/// Path to shared test data, or None (with a printed reason) when absent.
+pub fn shared(rel: &str) -> Option<PathBuf> {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/data")
+        .join(rel);
+    if p.exists() {
+        Some(p)
+    } else {
+        eprintln!("skipped: {} is not present", p.display());
+        None
+    }
+}
+
+/// A path as &str.
+pub fn s(p: &Path) -> &str {
+    p.to_str().expect("utf-8 temp path")
+}
+
+/// Every file under `dir` with its bytes, sorted by relative path.
+pub fn tree_bytes(dir: &Path) -> Vec<(String, Vec<u8>)> {
+    let mut out = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                let rel = p.strip_prefix(dir).unwrap().to_string_lossy().into_owned();
+                out.push((rel, std::fs::read(&p).unwrap()));
+            }
+        }
+    }
+    out.sort();
+    out
+}
+
+/// Peak RSS reported by the last JSON progress lines on stderr.
+pub fn peak_rss(stderr: &str) -> u64 {
+    stderr
+        .lines()
+        .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
+        .filter_map(|v| v.get("peak_rss_bytes").and_then(|x| x.as_u64()))
+        .max()
+        .unwrap_or(0)
+}
