@@ -20,8 +20,10 @@
 
 pub mod error;
 pub mod exec;
+pub mod extract;
 pub mod io;
 pub mod metrics;
+pub mod recon;
 pub mod store;
 pub mod synth;
 pub mod types;

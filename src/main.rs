@@ -76,6 +76,51 @@ enum Cmd {
         #[command(flatten)]
         common: Common,
     },
+    /// Reconstruct a watertight surface from oriented points (adaptive FFT, two-level).
+    Reconstruct {
+        /// Point files, or one store directory made by `ingest`.
+        inputs: Vec<PathBuf>,
+        /// Output mesh (binary PLY).
+        #[arg(short, long)]
+        output: PathBuf,
+        /// Scanalyze .conf listing scans and their transforms.
+        #[arg(long)]
+        conf: Option<PathBuf>,
+        /// Octree depth: 2^depth cells per edge of the bounding cube (as PoissonRecon).
+        #[arg(long, default_value_t = 9)]
+        depth: u32,
+        /// Tile edge in voxels (power of two; default 128).
+        #[arg(long)]
+        tile: Option<u64>,
+        /// Work directory for the store and leaf checkpoints (default: OUTPUT.work).
+        #[arg(long)]
+        work_dir: Option<PathBuf>,
+        /// Continue a killed run from the leaves in its work directory.
+        #[arg(long)]
+        resume: bool,
+        /// Keep the work directory after success.
+        #[arg(long)]
+        keep_work: bool,
+        #[command(flatten)]
+        common: Common,
+    },
+    /// Check a mesh: counts, watertight, manifold, components; distances to a truth or reference.
+    Check {
+        /// The mesh (PLY).
+        mesh: PathBuf,
+        /// Exact surface written by `synth` (.truth.json).
+        #[arg(long)]
+        truth: Option<PathBuf>,
+        /// Reference mesh or point file.
+        #[arg(long)]
+        reference: Option<PathBuf>,
+        /// Sample points for each distance direction.
+        #[arg(long, default_value_t = 200_000)]
+        samples: usize,
+        /// Print JSON instead of text.
+        #[arg(long)]
+        json: bool,
+    },
     /// Describe a point file or a store.
     Info {
         /// A point file or a store directory.
@@ -202,6 +247,59 @@ fn run(cli: Cli) -> Result<()> {
                 human_bytes(peak_rss_bytes())
             );
         }
+        Cmd::Reconstruct {
+            inputs,
+            output,
+            conf,
+            depth,
+            tile,
+            work_dir,
+            resume,
+            keep_work,
+            common,
+        } => {
+            let ctx = ctx(&common)?;
+            let st = reconstruct(
+                &ctx,
+                &inputs,
+                conf.as_deref(),
+                &output,
+                depth,
+                tile,
+                work_dir,
+                resume,
+                keep_work,
+            )?;
+            println!(
+                "reconstructed {} vertices, {} triangles into {} in {:.2} s ({} leaves, iso {:.4}), peak memory {}",
+                st.vertices,
+                st.faces,
+                output.display(),
+                st.secs,
+                st.leaves,
+                st.iso,
+                human_bytes(peak_rss_bytes())
+            );
+        }
+        Cmd::Check {
+            mesh,
+            truth,
+            reference,
+            samples,
+            json,
+        } => {
+            let rep = scanflow::metrics::run_check(
+                &mesh,
+                truth.as_deref(),
+                reference.as_deref(),
+                samples,
+            )?;
+            if json {
+                println!("{}", serde_json::to_string(&rep)?);
+            } else {
+                println!("{rep}");
+            }
+        }
         Cmd::Info { path, json, common } => {
             let ctx = ctx(&common)?;
             info(&ctx, &path, json)?;
@@ -217,8 +315,9 @@ fn run(cli: Cli) -> Result<()> {
                 format!("{}: cannot create the demo directory", output.display())
             })?;
             let ply = output.join("demo_points.ply");
-            let store = output.join("demo.store");
-            for p in [&ply, &store] {
+            let mesh = output.join("demo.ply");
+            let work = output.join("demo.work");
+            for p in [&ply, &mesh, &work] {
                 if p.is_dir() {
                     std::fs::remove_dir_all(p).with_context(|| {
                         format!("{}: cannot remove the old demo output", p.display())
@@ -231,30 +330,38 @@ fn run(cli: Cli) -> Result<()> {
             }
             let rep = synth(&ctx, "bumpy", points, 0.001, 1, &ply)?;
             println!(
-                "synthesised {} points of a bumpy sphere in {:.2} s",
+                "synthesised {} points of a bumpy sphere (noise 0.001) in {:.2} s",
                 rep.points, rep.secs
             );
-            let st = scanflow::store::ingest(
-                &[InputSpec::plain(&ply)],
-                &store,
-                &IngestParams {
-                    // Small cells, so that the demo shows an octree rather than one cell.
-                    max_cell_points: 100_000,
-                    ..Default::default()
-                },
+            let st = reconstruct(
                 &ctx,
+                std::slice::from_ref(&ply),
+                None,
+                &mesh,
+                9,
+                None,
+                Some(work),
+                false,
+                false,
+            )?;
+            let total = t0.elapsed().as_secs_f64();
+            let check = scanflow::metrics::run_check(
+                &mesh,
+                Some(&scanflow::synth::truth_path(&ply)),
+                None,
+                200_000,
             )?;
             println!(
-                "ingested into {} ({} cells) in {:.2} s: {:.2} M points/s",
-                store.display(),
-                st.cells,
+                "reconstructed {} at depth 9 in {:.2} s: {} vertices, {} triangles",
+                mesh.display(),
                 st.secs,
-                st.points as f64 / st.secs / 1e6
+                st.vertices,
+                st.faces
             );
-            info(&ctx, &store, false)?;
+            println!("{check}");
             println!(
                 "demo done in {:.2} s, peak memory {}",
-                t0.elapsed().as_secs_f64(),
+                total,
                 human_bytes(peak_rss_bytes())
             );
         }
@@ -285,6 +392,58 @@ fn synth(
     })?;
     stage.finish(None);
     Ok(r)
+}
+
+#[allow(clippy::too_many_arguments)]
+fn reconstruct(
+    ctx: &Ctx,
+    inputs: &[PathBuf],
+    conf: Option<&Path>,
+    output: &Path,
+    depth: u32,
+    tile: Option<u64>,
+    work_dir: Option<PathBuf>,
+    resume: bool,
+    keep_work: bool,
+) -> Result<scanflow::recon::ReconStats> {
+    let work = work_dir.unwrap_or_else(|| {
+        let mut s = output.as_os_str().to_owned();
+        s.push(".work");
+        PathBuf::from(s)
+    });
+    // One directory argument is a store; anything else is ingested into the work dir.
+    let store_dir = if conf.is_none() && inputs.len() == 1 && inputs[0].is_dir() {
+        inputs[0].clone()
+    } else {
+        let specs = input_specs(inputs, conf)?;
+        let dir = work.join("store");
+        if !(resume && dir.join("manifest.json").exists()) {
+            if dir.exists() && !resume {
+                anyhow::bail!(
+                    "{}: work directory holds another run's files; pass --resume to continue that run, or choose another --work-dir",
+                    work.display()
+                );
+            }
+            std::fs::create_dir_all(&work)
+                .with_context(|| format!("{}: cannot create the work directory", work.display()))?;
+            scanflow::store::ingest(&specs, &dir, &IngestParams::default(), ctx)?;
+        }
+        dir
+    };
+    let store = Store::open(&store_dir)?;
+    let params = scanflow::recon::ReconParams {
+        depth,
+        sigma_vox: 1.0,
+        tile_voxels: tile,
+        work_dir: work.clone(),
+        resume,
+    };
+    let st = scanflow::recon::reconstruct(&store, output, &params, ctx)?;
+    if !keep_work {
+        std::fs::remove_dir_all(&work)
+            .with_context(|| format!("{}: cannot remove the work directory", work.display()))?;
+    }
+    Ok(st)
 }
 
 fn input_specs(inputs: &[PathBuf], conf: Option<&Path>) -> Result<Vec<InputSpec>> {

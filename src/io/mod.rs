@@ -8,6 +8,8 @@
 
 pub mod conf;
 pub mod las;
+pub mod mesh_read;
+pub mod mesh_write;
 pub mod mmap;
 pub mod ply;
 pub mod ply_write;

@@ -87,6 +87,11 @@ pub struct IngestStats {
     pub count_levels: u32,
 }
 
+/// The root cube is the bounding box's largest edge enlarged by 10% (PoissonRecon's default
+/// `--scale 1.1`), centred on the box: reconstruction solves on this cube, and the margin keeps
+/// the surface off its faces.
+pub const CUBE_MARGIN: f64 = 0.1;
+
 /// Bytes in flight per point of a chunk: mapped input (up to 64 bytes a record), the decoded
 /// batch (52), its records (up to 52), and sort keys and leaf ids (12).
 const CHUNK_BYTES_PER_POINT: u64 = 64 + 52 + 52 + 12;
@@ -184,7 +189,7 @@ pub fn ingest(
     let threads = ctx.threads() as u64;
     let wave = 2 * threads;
     let chunk_points = params.chunk_points.unwrap_or_else(|| {
-        (budget.total() / 2 / (wave * CHUNK_BYTES_PER_POINT)).clamp(4096, 1 << 20)
+        (budget.total() / 2 / (wave * CHUNK_BYTES_PER_POINT)).clamp(4096, 1 << 18)
     });
     let chunk_bytes = chunk_points * CHUNK_BYTES_PER_POINT;
     let mut chunks: Vec<(usize, ChunkSpec)> = Vec::new();
@@ -244,7 +249,7 @@ pub fn ingest(
             "no valid points: every point has a non-finite coordinate",
         ));
     }
-    let cube = Cube::around(&cube_bounds, 1e-6);
+    let cube = Cube::around(&cube_bounds, CUBE_MARGIN);
 
     // Pass 2: count.
     let max_levels_by_mem = {

@@ -105,6 +105,76 @@ pub struct Scatter {
     buffered: usize,
     cap: usize,
     zstd_level: i32,
+    writer: FrameWriter,
+}
+
+/// Frames queued for the writer thread at most; a slow disk then slows the scatter down
+/// instead of filling memory.
+const WRITE_QUEUE: usize = 16;
+
+/// A thread that appends compressed frames to cell files in the order they are sent, so
+/// that disk writes (and dirty-page throttling) overlap with parsing and compression.
+struct FrameWriter {
+    tx: Option<crossbeam_channel::Sender<(usize, PathBuf, Vec<u8>)>>,
+    handle: Option<std::thread::JoinHandle<Result<()>>>,
+}
+
+impl FrameWriter {
+    fn start() -> Result<FrameWriter> {
+        let (tx, rx) = crossbeam_channel::bounded::<(usize, PathBuf, Vec<u8>)>(WRITE_QUEUE);
+        let handle = std::thread::Builder::new()
+            .name("scanflow-writer".into())
+            .spawn(move || -> Result<()> {
+                let mut open: Option<(usize, PathBuf, std::io::BufWriter<std::fs::File>)> = None;
+                for (i, path, z) in rx {
+                    if open.as_ref().map(|o| o.0) != Some(i) {
+                        if let Some((_, p, mut w)) = open.take() {
+                            w.flush().with_path(&p)?;
+                        }
+                        let f = std::fs::OpenOptions::new()
+                            .append(true)
+                            .open(&path)
+                            .with_path(&path)?;
+                        open = Some((i, path, std::io::BufWriter::with_capacity(1 << 20, f)));
+                    }
+                    if let Some((_, p, w)) = open.as_mut() {
+                        w.write_all(&z).with_path(p)?;
+                    }
+                }
+                if let Some((_, p, mut w)) = open.take() {
+                    w.flush().with_path(&p)?;
+                }
+                Ok(())
+            })
+            .map_err(|e| Error::Internal(format!("cannot start the writer thread: {e}")))?;
+        Ok(FrameWriter {
+            tx: Some(tx),
+            handle: Some(handle),
+        })
+    }
+
+    fn send(&self, i: usize, path: &Path, z: Vec<u8>) -> std::result::Result<(), ()> {
+        match &self.tx {
+            Some(tx) => tx.send((i, path.to_path_buf(), z)).map_err(|_| ()),
+            None => Err(()),
+        }
+    }
+
+    fn finish(&mut self) -> Result<()> {
+        drop(self.tx.take());
+        match self.handle.take() {
+            Some(h) => h
+                .join()
+                .map_err(|_| Error::Internal("the writer thread panicked".into()))?,
+            None => Ok(()),
+        }
+    }
+}
+
+impl Drop for FrameWriter {
+    fn drop(&mut self) {
+        let _ = self.finish();
+    }
 }
 
 impl Scatter {
@@ -137,6 +207,7 @@ impl Scatter {
             buffered: 0,
             cap: cap_bytes.max(FRAME_BYTES),
             zstd_level,
+            writer: FrameWriter::start()?,
         })
     }
 
@@ -189,29 +260,15 @@ impl Scatter {
                 .map(|&(i, f)| (i, zstd::bulk::compress(f, level)))
                 .collect()
         });
-        let mut open: Option<(usize, std::io::BufWriter<std::fs::File>)> = None;
         for (i, z) in frames {
             let z = z.map_err(|e| Error::Internal(format!("zstd compression failed: {e}")))?;
-            if open.as_ref().map(|o| o.0) != Some(i) {
-                if let Some((j, mut w)) = open.take() {
-                    w.flush().with_path(&self.cells[j].file)?;
-                }
-                let c = &self.cells[i];
-                let f = std::fs::OpenOptions::new()
-                    .append(true)
-                    .open(&c.file)
-                    .with_path(&c.file)?;
-                open = Some((i, std::io::BufWriter::with_capacity(1 << 20, f)));
-            }
             let c = &mut self.cells[i];
-            if let Some((_, w)) = open.as_mut() {
-                w.write_all(&z).with_path(&c.file)?;
-            }
             c.crc.update(&z);
             c.bytes += z.len() as u64;
-        }
-        if let Some((j, mut w)) = open.take() {
-            w.flush().with_path(&self.cells[j].file)?;
+            if self.writer.send(i, &c.file, z).is_err() {
+                // The writer stopped on an error; finish() reports it.
+                break;
+            }
         }
         Ok(())
     }
@@ -219,6 +276,7 @@ impl Scatter {
     /// Flush everything and return the cells.
     pub fn finish(mut self, pool: &rayon::ThreadPool) -> Result<Vec<CellOut>> {
         self.flush(pool, 0)?;
+        self.writer.finish()?;
         Ok(self.cells)
     }
 }

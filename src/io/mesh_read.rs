@@ -1,0 +1,838 @@
+//! PLY mesh reader: vertices and triangulated faces, for `scanflow check` and tests.
+//!
+//! Vertices come through [`PlyReader`] (any property order and scalar type, ascii or binary
+//! of either endianness). Faces come from the `face` element's list property
+//! `vertex_indices` (or `vertex_index`): any integer count and index types; polygons with
+//! more than three corners are fan-triangulated, `(v0, v1, v2, v3)` giving `(v0, v1, v2)` and
+//! `(v0, v2, v3)`, which keeps their winding. Other face properties (`flags`, `quality`, other
+//! lists), before or after the index list, are skipped by size; elements other than `vertex`
+//! and `face` are skipped.
+//!
+//! Ascii files hold one record per line, as [`PlyReader`] assumes too; a face line with fewer
+//! or more values than its properties call for is an error. Errors name the file, the face
+//! (0-based) and its byte (binary) or line (ascii), counted from the start of the file.
+//!
+//! The whole mesh is held in memory (24 bytes a vertex, 12 a triangle); the file is streamed
+//! through a buffered reader.
+
+use std::fs::File;
+use std::io::{BufRead, BufReader, Read, Seek, SeekFrom};
+use std::path::Path;
+
+use crate::error::{Error, IoContext, Location, Result};
+use crate::io::PointReader;
+use crate::io::ply::{Element, Encoding, PlyReader, Property, Scalar, parse_header};
+use crate::types::PointBatch;
+
+/// A triangle mesh: positions and vertex-index triples, wound as stored.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Mesh {
+    /// Vertex positions, in the file's units and frame.
+    pub vertices: Vec<[f64; 3]>,
+    /// Triangles as indices into `vertices`, in file order (a polygon's fan in order).
+    pub triangles: Vec<[u32; 3]>,
+}
+
+impl Mesh {
+    /// The first triangle with an index not below the vertex count, as `(triangle, index)`.
+    /// [`read_mesh`] never returns such a mesh; hand-built ones may hold one.
+    pub fn check_indices(&self) -> Option<(usize, u32)> {
+        let n = self.vertices.len();
+        self.triangles
+            .iter()
+            .enumerate()
+            .find_map(|(t, tri)| tri.iter().find(|&&v| v as usize >= n).map(|&v| (t, v)))
+    }
+}
+
+/// Bytes read to find the header.
+const HEADER_BYTES: u64 = 1 << 20;
+/// Vertices per chunk when reading them through [`PlyReader`].
+const VERTEX_CHUNK: u64 = 1 << 20;
+/// Buffer of the face reader.
+const BUF_BYTES: usize = 1 << 20;
+
+/// Number of records of the `face` element of a PLY file: `None` when the file is not a PLY
+/// (does not start with `ply`) or declares no `face` element.
+pub fn ply_face_count(path: &Path) -> Result<Option<u64>> {
+    let mut f = File::open(path).with_path(path)?;
+    let mut head = Vec::new();
+    (&mut f)
+        .take(HEADER_BYTES)
+        .read_to_end(&mut head)
+        .with_path(path)?;
+    if !head.starts_with(b"ply") {
+        return Ok(None);
+    }
+    let header = parse_header(path, &head)?;
+    Ok(header
+        .elements
+        .iter()
+        .find(|e| e.name == "face")
+        .map(|e| e.count))
+}
+
+/// Read a PLY mesh: its vertices and its faces, fan-triangulated.
+///
+/// A file without a `face` element is an error ("has no faces: expected a mesh"); one whose
+/// `face` element has no record gives a mesh without triangles. Face indices must be
+/// non-negative and below the vertex count, and every face must have at least 3 corners.
+pub fn read_mesh(path: &Path) -> Result<Mesh> {
+    let reader = PlyReader::open(path)?;
+    let header = reader.header().clone();
+    let Some(face_at) = header.elements.iter().position(|e| e.name == "face") else {
+        return Err(Error::input(
+            path,
+            "has no faces: expected a mesh (the PLY header declares no \"face\" element)",
+        ));
+    };
+    let face = &header.elements[face_at];
+    let layout = FaceLayout::new(path, face)?;
+    let n_vertices = reader.len();
+    if n_vertices > u64::from(u32::MAX) + 1 {
+        return Err(Error::input(
+            path,
+            format!(
+                "has {n_vertices} vertices, more than the 2^32 that 32-bit triangle indices can address"
+            ),
+        ));
+    }
+
+    let mut vertices = Vec::with_capacity(n_vertices as usize);
+    let mut batch = PointBatch::default();
+    for chunk in reader.chunks(VERTEX_CHUNK)? {
+        batch.clear();
+        reader.read_chunk(&chunk, false, &mut batch)?;
+        vertices.extend_from_slice(&batch.pos);
+    }
+    drop(batch);
+    drop(reader);
+
+    let file = File::open(path).with_path(path)?;
+    let file_len = file.metadata().with_path(path)?.len();
+    let mut src = Source {
+        path,
+        r: BufReader::with_capacity(BUF_BYTES, file),
+        pos: 0,
+        file_len,
+    };
+    src.seek(header.data_start)?;
+    let mut faces = FaceSink {
+        n_vertices,
+        // Every record takes at least 2 bytes, so this never reserves more than the file holds.
+        triangles: Vec::with_capacity(face.count.min(file_len / 2) as usize),
+        polygon: Vec::new(),
+    };
+    match header.encoding {
+        Encoding::Ascii => {
+            let skip = header.elements[..face_at]
+                .iter()
+                .fold(0u64, |s, e| s.saturating_add(e.count));
+            let mut line = header.lines;
+            for _ in 0..skip {
+                if !src.skip_line()? {
+                    return Err(Error::format(
+                        path,
+                        Location::Line(line + 1),
+                        format!(
+                            "truncated: the file ends after {} data lines, before the {} \"face\" lines the header promises",
+                            line - header.lines,
+                            face.count
+                        ),
+                    ));
+                }
+                line += 1;
+            }
+            read_ascii_faces(&mut src, &layout, face.count, line, &mut faces)?;
+        }
+        Encoding::BinaryLe | Encoding::BinaryBe => {
+            let be = header.encoding == Encoding::BinaryBe;
+            for el in &header.elements[..face_at] {
+                skip_binary_element(&mut src, el, be)?;
+            }
+            read_binary_faces(&mut src, &layout, face.count, be, &mut faces)?;
+        }
+    }
+    Ok(Mesh {
+        vertices,
+        triangles: faces.triangles,
+    })
+}
+
+/// A face property: only sizes matter, except for the index list.
+#[derive(Debug, Clone, Copy)]
+enum FaceProp {
+    Scalar(Scalar),
+    List { count: Scalar, item: Scalar },
+}
+
+/// The face element's properties and which one holds the corner indices.
+#[derive(Debug)]
+struct FaceLayout {
+    props: Vec<FaceProp>,
+    /// Position of the index list in `props`.
+    indices: usize,
+}
+
+impl FaceLayout {
+    fn new(path: &Path, face: &Element) -> Result<FaceLayout> {
+        let find = |want: &str| {
+            face.props
+                .iter()
+                .position(|p| matches!(p, Property::List { name, .. } if name == want))
+        };
+        let Some(indices) = find("vertex_indices").or_else(|| find("vertex_index")) else {
+            let names: Vec<&str> = face
+                .props
+                .iter()
+                .map(|p| match p {
+                    Property::Scalar { name, .. } | Property::List { name, .. } => name.as_str(),
+                })
+                .collect();
+            return Err(Error::format(
+                path,
+                Location::Line(face.line),
+                format!(
+                    "the face element has no list property \"vertex_indices\" or \"vertex_index\" (found: {})",
+                    if names.is_empty() {
+                        "no property".to_string()
+                    } else {
+                        names.join(" ")
+                    }
+                ),
+            ));
+        };
+        let props: Vec<FaceProp> = face
+            .props
+            .iter()
+            .map(|p| match p {
+                Property::Scalar { ty, .. } => FaceProp::Scalar(*ty),
+                Property::List { count, item, .. } => FaceProp::List {
+                    count: *count,
+                    item: *item,
+                },
+            })
+            .collect();
+        if let FaceProp::List { item, .. } = props[indices]
+            && matches!(item, Scalar::F32 | Scalar::F64)
+        {
+            return Err(Error::format(
+                path,
+                Location::Line(face.line),
+                format!("face vertex indices are declared {item:?}, expected an integer type"),
+            ));
+        }
+        Ok(FaceLayout { props, indices })
+    }
+}
+
+/// Collects faces into triangles, checking their indices.
+struct FaceSink {
+    n_vertices: u64,
+    triangles: Vec<[u32; 3]>,
+    /// Corners of the face being read.
+    polygon: Vec<u32>,
+}
+
+impl FaceSink {
+    /// Check one corner index (as read) of face `face`; the error message without location.
+    fn corner(&mut self, face: u64, v: f64) -> std::result::Result<(), String> {
+        if !(v >= 0.0 && v < self.n_vertices as f64) {
+            return Err(format!(
+                "face {face}: vertex index {v} is out of range: the file has {} vertices",
+                self.n_vertices
+            ));
+        }
+        self.polygon.push(v as u32);
+        Ok(())
+    }
+
+    /// Triangulate the face read since the last call.
+    fn finish(&mut self, face: u64) -> std::result::Result<(), String> {
+        let p = &self.polygon;
+        if p.len() < 3 {
+            return Err(format!(
+                "face {face} has {} vertices, expected at least 3",
+                p.len()
+            ));
+        }
+        for i in 1..p.len() - 1 {
+            self.triangles.push([p[0], p[i], p[i + 1]]);
+        }
+        self.polygon.clear();
+        Ok(())
+    }
+}
+
+/// A buffered reader that knows its absolute byte position.
+struct Source<'a> {
+    path: &'a Path,
+    r: BufReader<File>,
+    pos: u64,
+    file_len: u64,
+}
+
+impl Source<'_> {
+    fn seek(&mut self, to: u64) -> Result<()> {
+        self.r.seek(SeekFrom::Start(to)).with_path(self.path)?;
+        self.pos = to;
+        Ok(())
+    }
+
+    /// Skip `n` bytes known to lie within the file.
+    fn skip(&mut self, n: u64) -> Result<()> {
+        let Ok(d) = i64::try_from(n) else {
+            return self.seek(self.pos.saturating_add(n));
+        };
+        self.r.seek_relative(d).with_path(self.path)?;
+        self.pos += n;
+        Ok(())
+    }
+
+    /// True when `n` more bytes lie within the file.
+    fn has(&self, n: u64) -> bool {
+        self.pos.checked_add(n).is_some_and(|e| e <= self.file_len)
+    }
+
+    /// Read one value of type `ty` known to lie within the file.
+    fn value(&mut self, ty: Scalar, be: bool) -> Result<f64> {
+        let mut b = [0u8; 8];
+        let n = ty.size();
+        self.r.read_exact(&mut b[..n]).with_path(self.path)?;
+        self.pos += n as u64;
+        Ok(ty.read(&b, be))
+    }
+
+    /// Skip one line; false at the end of the file.
+    fn skip_line(&mut self) -> Result<bool> {
+        let mut seen = 0u64;
+        loop {
+            let buf = self.r.fill_buf().with_path(self.path)?;
+            if buf.is_empty() {
+                self.pos += seen;
+                return Ok(seen > 0);
+            }
+            match memchr::memchr(b'\n', buf) {
+                Some(i) => {
+                    self.r.consume(i + 1);
+                    self.pos += seen + i as u64 + 1;
+                    return Ok(true);
+                }
+                None => {
+                    let l = buf.len();
+                    self.r.consume(l);
+                    seen += l as u64;
+                }
+            }
+        }
+    }
+
+    /// Read one line into `line` (without the newline); false at the end of the file.
+    fn line(&mut self, line: &mut Vec<u8>) -> Result<bool> {
+        line.clear();
+        let n = self.r.read_until(b'\n', line).with_path(self.path)?;
+        self.pos += n as u64;
+        if line.last() == Some(&b'\n') {
+            line.pop();
+        }
+        Ok(n > 0)
+    }
+}
+
+/// Skip a binary element that comes before `face`.
+fn skip_binary_element(src: &mut Source<'_>, el: &Element, be: bool) -> Result<()> {
+    let fixed: Option<u64> = el.props.iter().try_fold(0u64, |s, p| match p {
+        Property::Scalar { ty, .. } => Some(s + ty.size() as u64),
+        Property::List { .. } => None,
+    });
+    let truncated = |src: &Source<'_>, rec: u64| {
+        Error::format(
+            src.path,
+            Location::Byte(src.pos),
+            format!(
+                "truncated: the header promises {} \"{}\" records, but the file ends at byte {} inside record {rec}",
+                el.count, el.name, src.file_len
+            ),
+        )
+    };
+    if let Some(size) = fixed {
+        let bytes = size.saturating_mul(el.count);
+        if !src.has(bytes) {
+            let rec = (src.file_len.saturating_sub(src.pos))
+                .checked_div(size)
+                .unwrap_or(0);
+            return Err(truncated(src, rec));
+        }
+        return src.skip(bytes);
+    }
+    for rec in 0..el.count {
+        for p in &el.props {
+            match p {
+                Property::Scalar { ty, .. } => {
+                    if !src.has(ty.size() as u64) {
+                        return Err(truncated(src, rec));
+                    }
+                    src.skip(ty.size() as u64)?;
+                }
+                Property::List { count, item, .. } => {
+                    if !src.has(count.size() as u64) {
+                        return Err(truncated(src, rec));
+                    }
+                    let at = src.pos;
+                    let n = src.value(*count, be)?;
+                    if n < 0.0 {
+                        return Err(Error::format(
+                            src.path,
+                            Location::Byte(at),
+                            format!(
+                                "\"{}\" record {rec} has a negative list length {n}",
+                                el.name
+                            ),
+                        ));
+                    }
+                    let bytes = (n as u64).saturating_mul(item.size() as u64);
+                    if !src.has(bytes) {
+                        return Err(truncated(src, rec));
+                    }
+                    src.skip(bytes)?;
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Read `count` binary face records starting at the source's position.
+fn read_binary_faces(
+    src: &mut Source<'_>,
+    layout: &FaceLayout,
+    count: u64,
+    be: bool,
+    faces: &mut FaceSink,
+) -> Result<()> {
+    for face in 0..count {
+        let start = src.pos;
+        let truncated = |src: &Source<'_>| {
+            Error::format(
+                src.path,
+                Location::Byte(start),
+                format!(
+                    "truncated: the header promises {count} faces, but the file ends at byte {} inside face {face}",
+                    src.file_len
+                ),
+            )
+        };
+        for (k, p) in layout.props.iter().enumerate() {
+            match *p {
+                FaceProp::Scalar(ty) => {
+                    if !src.has(ty.size() as u64) {
+                        return Err(truncated(src));
+                    }
+                    src.skip(ty.size() as u64)?;
+                }
+                FaceProp::List { count: cty, item } => {
+                    if !src.has(cty.size() as u64) {
+                        return Err(truncated(src));
+                    }
+                    let n = src.value(cty, be)?;
+                    if n < 0.0 {
+                        return Err(Error::format(
+                            src.path,
+                            Location::Byte(start),
+                            format!("face {face} has a negative list length {n}"),
+                        ));
+                    }
+                    let n = n as u64;
+                    let bytes = n.saturating_mul(item.size() as u64);
+                    if !src.has(bytes) {
+                        return Err(truncated(src));
+                    }
+                    if k == layout.indices {
+                        for _ in 0..n {
+                            let v = src.value(item, be)?;
+                            faces
+                                .corner(face, v)
+                                .map_err(|m| Error::format(src.path, Location::Byte(start), m))?;
+                        }
+                    } else {
+                        src.skip(bytes)?;
+                    }
+                }
+            }
+        }
+        faces
+            .finish(face)
+            .map_err(|m| Error::format(src.path, Location::Byte(start), m))?;
+    }
+    Ok(())
+}
+
+/// Read `count` ascii face lines; `line` is the number of lines before the first one.
+fn read_ascii_faces(
+    src: &mut Source<'_>,
+    layout: &FaceLayout,
+    count: u64,
+    mut line: u64,
+    faces: &mut FaceSink,
+) -> Result<()> {
+    let mut text = Vec::new();
+    for face in 0..count {
+        line += 1;
+        if !src.line(&mut text)? {
+            return Err(Error::format(
+                src.path,
+                Location::Line(line),
+                format!(
+                    "truncated: the header promises {count} faces, but the file ends after {face} of them"
+                ),
+            ));
+        }
+        let at = Location::Line(line);
+        let bad = |m: String| Error::format(src.path, at, m);
+        let mut toks = text
+            .split(|b| b.is_ascii_whitespace())
+            .filter(|t| !t.is_empty());
+        let int = |t: Option<&[u8]>, what: &str| -> Result<i64> {
+            let Some(t) = t else {
+                return Err(bad(format!(
+                    "face {face}: the line ends where {what} was expected"
+                )));
+            };
+            std::str::from_utf8(t)
+                .ok()
+                .and_then(|s| s.parse::<i64>().ok())
+                .ok_or_else(|| {
+                    bad(format!(
+                        "face {face}: {what} \"{}\" is not an integer",
+                        String::from_utf8_lossy(t)
+                    ))
+                })
+        };
+        for (k, p) in layout.props.iter().enumerate() {
+            match *p {
+                FaceProp::Scalar(_) => {
+                    // Skipped unparsed, but it must be there.
+                    if toks.next().is_none() {
+                        return Err(bad(format!(
+                            "face {face}: the line ends where property {} was expected",
+                            k + 1
+                        )));
+                    }
+                }
+                FaceProp::List { .. } => {
+                    let n = int(toks.next(), "a list length")?;
+                    if n < 0 {
+                        return Err(bad(format!("face {face} has a negative list length {n}")));
+                    }
+                    if k == layout.indices {
+                        for _ in 0..n {
+                            let v = int(toks.next(), "a vertex index")?;
+                            faces.corner(face, v as f64).map_err(bad)?;
+                        }
+                    } else {
+                        for _ in 0..n {
+                            if toks.next().is_none() {
+                                return Err(bad(format!(
+                                    "face {face}: the line ends inside the list of property {}",
+                                    k + 1
+                                )));
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        if toks.next().is_some() {
+            return Err(bad(format!(
+                "face {face}: the line has more values than the face properties declare"
+            )));
+        }
+        faces.finish(face).map_err(bad)?;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::path::PathBuf;
+
+    fn write(dir: &Path, name: &str, bytes: &[u8]) -> PathBuf {
+        let p = dir.join(name);
+        std::fs::write(&p, bytes).unwrap();
+        p
+    }
+
+    fn err(p: &Path) -> String {
+        match read_mesh(p) {
+            Ok(m) => panic!("{} read as a mesh: {m:?}", p.display()),
+            Err(e) => e.to_string(),
+        }
+    }
+
+    const ASCII: &str = "ply\nformat ascii 1.0\ncomment a quad and a triangle\nelement vertex 5\nproperty float x\nproperty float y\nproperty float z\nelement edge 1\nproperty int vertex1\nproperty int vertex2\nelement face 2\nproperty uchar flags\nproperty list uchar int vertex_indices\nproperty float quality\nend_header\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n2 2 1\n0 1\n7 4 0 1 2 3 0.5\n1 3 1 2 4 0.25\n";
+
+    #[test]
+    fn ascii_quad_is_fan_triangulated() {
+        let d = tempfile::tempdir().unwrap();
+        let p = write(d.path(), "q.ply", ASCII.as_bytes());
+        let m = read_mesh(&p).unwrap();
+        assert_eq!(m.vertices.len(), 5);
+        assert_eq!(m.vertices[4], [2.0, 2.0, 1.0]);
+        assert_eq!(m.triangles, vec![[0, 1, 2], [0, 2, 3], [1, 2, 4]]);
+        assert_eq!(m.check_indices(), None);
+        assert_eq!(ply_face_count(&p).unwrap(), Some(2));
+    }
+
+    /// A binary mesh: a `camera` and a list element before `vertex`, a list element between
+    /// `vertex` and `face`, face properties before and after the index list.
+    fn binary(be: bool, count_ty: &str, index_ty: &str, faces: &[&[i64]]) -> Vec<u8> {
+        let mut v = format!(
+            "ply\nformat binary_{}_endian 1.0\nelement camera 1\nproperty double a\nelement strip 2\nproperty list uchar int vertex_indices\nelement vertex 5\nproperty float y\nproperty double x\nproperty float z\nproperty int flags\nelement tristrips 1\nproperty list int int vertex_indices\nelement face {}\nproperty int flags\nproperty list {count_ty} {index_ty} vertex_index\nproperty list uchar float texcoord\nproperty float quality\nelement other 1\nproperty float w\nend_header\n",
+            if be { "big" } else { "little" },
+            faces.len()
+        )
+        .into_bytes();
+        let put = |v: &mut Vec<u8>, b: &[u8]| {
+            if be {
+                v.extend(b.iter().rev())
+            } else {
+                v.extend(b)
+            }
+        };
+        let int = |v: &mut Vec<u8>, ty: &str, x: i64| match ty {
+            "uchar" | "uint8" => v.push(x as u8),
+            "char" => v.push(x as i8 as u8),
+            "short" => put(v, &(x as i16).to_le_bytes()),
+            "ushort" => put(v, &(x as u16).to_le_bytes()),
+            "int" => put(v, &(x as i32).to_le_bytes()),
+            "uint" => put(v, &(x as u32).to_le_bytes()),
+            _ => panic!("{ty}"),
+        };
+        put(&mut v, &1.5f64.to_le_bytes());
+        for n in [2, 0] {
+            v.push(n);
+            for k in 0..n {
+                put(&mut v, &(k as i32).to_le_bytes());
+            }
+        }
+        for i in 0..5 {
+            put(&mut v, &(i as f32 * 2.0).to_le_bytes());
+            put(&mut v, &(i as f64).to_le_bytes());
+            put(&mut v, &(-(i as f32)).to_le_bytes());
+            put(&mut v, &7i32.to_le_bytes());
+        }
+        put(&mut v, &3i32.to_le_bytes());
+        for k in [0i32, 1, 2] {
+            put(&mut v, &k.to_le_bytes());
+        }
+        for (i, f) in faces.iter().enumerate() {
+            put(&mut v, &(i as i32).to_le_bytes());
+            int(&mut v, count_ty, f.len() as i64);
+            for &k in *f {
+                int(&mut v, index_ty, k);
+            }
+            v.push(i as u8);
+            for t in 0..i {
+                put(&mut v, &(t as f32).to_le_bytes());
+            }
+            put(&mut v, &0.5f32.to_le_bytes());
+        }
+        put(&mut v, &9f32.to_le_bytes());
+        v
+    }
+
+    #[test]
+    fn binary_any_types_both_endians() {
+        let d = tempfile::tempdir().unwrap();
+        let faces: &[&[i64]] = &[&[0, 1, 2, 3], &[4, 3, 2], &[0, 1, 2, 3, 4]];
+        for be in [false, true] {
+            for (cty, ity) in [
+                ("uchar", "int"),
+                ("ushort", "uint"),
+                ("int", "ushort"),
+                ("char", "uchar"),
+            ] {
+                let p = write(d.path(), "b.ply", &binary(be, cty, ity, faces));
+                let m = read_mesh(&p).unwrap_or_else(|e| panic!("{be} {cty} {ity}: {e}"));
+                assert_eq!(m.vertices.len(), 5);
+                assert_eq!(m.vertices[3], [3.0, 6.0, -3.0]);
+                assert_eq!(
+                    m.triangles,
+                    vec![
+                        [0, 1, 2],
+                        [0, 2, 3],
+                        [4, 3, 2],
+                        [0, 1, 2],
+                        [0, 2, 3],
+                        [0, 3, 4]
+                    ],
+                    "{be} {cty} {ity}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn every_binary_prefix_fails_cleanly() {
+        let d = tempfile::tempdir().unwrap();
+        let full = binary(false, "uchar", "int", &[&[0, 1, 2], &[2, 3, 4, 0]]);
+        // The trailing `other` element (4 bytes) is not read by the mesh reader, but
+        // `PlyReader::open` checks every element's extent.
+        for len in 0..full.len() {
+            let p = write(d.path(), "t.ply", &full[..len]);
+            let e = err(&p);
+            assert!(e.contains("t.ply"), "{len}: {e}");
+        }
+        let p = write(d.path(), "t.ply", &full);
+        assert_eq!(read_mesh(&p).unwrap().triangles.len(), 3);
+    }
+
+    #[test]
+    fn ascii_prefixes_fail_cleanly() {
+        let d = tempfile::tempdir().unwrap();
+        // Every prefix that ends before the last face line starts (a cut inside the last
+        // line can leave a valid shorter line).
+        let last = ASCII.trim_end().rfind('\n').unwrap() + 1;
+        for len in 0..last {
+            let p = write(d.path(), "t.ply", &ASCII.as_bytes()[..len]);
+            let e = err(&p);
+            assert!(e.contains("t.ply"), "{len}: {e}");
+        }
+        let p = write(d.path(), "t.ply", &ASCII.as_bytes()[..last]);
+        let e = err(&p);
+        assert!(e.contains("line 23") && e.contains("truncated"), "{e}");
+    }
+
+    #[test]
+    fn bad_faces_name_face_and_place() {
+        let d = tempfile::tempdir().unwrap();
+        let p = write(
+            d.path(),
+            "r.ply",
+            &binary(false, "uchar", "int", &[&[0, 1, 2], &[0, 1, 5]]),
+        );
+        let e = err(&p);
+        assert!(
+            e.contains("r.ply")
+                && e.contains("face 1: vertex index 5 is out of range")
+                && e.contains("byte "),
+            "{e}"
+        );
+        let p = write(
+            d.path(),
+            "n.ply",
+            &binary(true, "uchar", "int", &[&[0, -1, 2]]),
+        );
+        let e = err(&p);
+        assert!(e.contains("face 0: vertex index -1"), "{e}");
+        let p = write(
+            d.path(),
+            "s.ply",
+            &binary(false, "uchar", "int", &[&[0, 1]]),
+        );
+        let e = err(&p);
+        assert!(
+            e.contains("face 0 has 2 vertices, expected at least 3"),
+            "{e}"
+        );
+
+        let cases: &[(&str, &str, &str)] = &[
+            (
+                "7 4 0 1 2 3 0.5",
+                "7 4 0 1 2 9 0.5",
+                "line 22: face 0: vertex index 9 is out of range",
+            ),
+            (
+                "1 3 1 2 4 0.25",
+                "1 3 1 2 4",
+                "line 23: face 1: the line ends where property 3",
+            ),
+            (
+                "1 3 1 2 4 0.25",
+                "1 3 1 2 4 0.25 8",
+                "line 23: face 1: the line has more values",
+            ),
+            (
+                "1 3 1 2 4 0.25",
+                "1 3 1 x 4 0.25",
+                "line 23: face 1: a vertex index \"x\" is not an integer",
+            ),
+            ("1 3 1 2 4 0.25", "1 -3 1 2 4 0.25", "negative list length"),
+            (
+                "1 3 1 2 4 0.25",
+                "1 3 1 2",
+                "line 23: face 1: the line ends where a vertex index",
+            ),
+            ("element face 2\n", "", "has no faces: expected a mesh"),
+            (
+                "list uchar int vertex_indices",
+                "list uchar float vertex_indices",
+                "expected an integer type",
+            ),
+            (
+                "list uchar int vertex_indices",
+                "list uchar int corners",
+                "no list property \"vertex_indices\"",
+            ),
+        ];
+        for (from, to, want) in cases {
+            let mut text = ASCII.replace(from, to);
+            if to.is_empty() {
+                // Without a face element the face lines are just trailing data.
+                text = text
+                    .replace("property uchar flags\n", "")
+                    .replace("property list uchar int vertex_indices\n", "")
+                    .replace("property float quality\n", "");
+            }
+            let p = write(d.path(), "a.ply", text.as_bytes());
+            let e = err(&p);
+            assert!(e.contains("a.ply") && e.contains(want), "{to:?}: {e}");
+        }
+    }
+
+    #[test]
+    fn empty_face_element_gives_no_triangles() {
+        let d = tempfile::tempdir().unwrap();
+        let p = write(
+            d.path(),
+            "e.ply",
+            b"ply\nformat binary_little_endian 1.0\nelement vertex 0\nproperty float x\nproperty float y\nproperty float z\nelement face 0\nproperty list uchar int vertex_indices\nend_header\n",
+        );
+        assert_eq!(read_mesh(&p).unwrap(), Mesh::default());
+        assert_eq!(ply_face_count(&p).unwrap(), Some(0));
+        let x = write(d.path(), "x.xyz", b"0 0 0\n");
+        assert_eq!(ply_face_count(&x).unwrap(), None);
+    }
+
+    /// A file of the shared data set, or `None` (with the reason printed) when absent.
+    fn shared(rel: &str) -> Option<PathBuf> {
+        let p = Path::new(env!("CARGO_MANIFEST_DIR")).join(rel);
+        if p.is_file() {
+            Some(p)
+        } else {
+            eprintln!("skipped: {} not found", p.display());
+            None
+        }
+    }
+
+    #[test]
+    fn bunny_res4() {
+        let Some(p) = shared("../shared/data/bunny/reconstruction/bun_zipper_res4.ply") else {
+            return;
+        };
+        let m = read_mesh(&p).unwrap();
+        assert_eq!((m.vertices.len(), m.triangles.len()), (453, 948));
+        assert_eq!(m.vertices[0], [-0.0312216, 0.126304, 0.00514924]);
+    }
+
+    #[test]
+    fn face000_with_flags_and_quality() {
+        let Some(p) = shared("../shared/data/scans/face000.ply") else {
+            return;
+        };
+        let m = read_mesh(&p).unwrap();
+        assert_eq!((m.vertices.len(), m.triangles.len()), (85_849, 166_259));
+        assert_eq!(m.check_indices(), None);
+    }
+}

@@ -1,0 +1,327 @@
+//! The local Poisson solve by FFT (Kazhdan 2005, §4; Schall et al. 2006, §3).
+//!
+//! Given oriented samples, the indicator function χ of the solid satisfies
+//! `Δχ = ∇·V`, where `V` is the (smoothed) field of outward normals. On a periodic grid of
+//! `n³` nodes with spacing `h` the normals are splatted trilinearly onto nodes as a density
+//! (`V_j = Σ_i n_i w_ij / h³`, so that grids of different spacing approximate the same
+//! continuous field), the divergence is taken by central differences, and in the Fourier
+//! domain
+//!
+//! ```text
+//!     χ̂(k) = − G_σ(k) · (∇·V)^(k) / |k|²,      G_σ(k) = exp(−σ²|k|²/2),   χ̂(0) = 0,
+//! ```
+//!
+//! with `k = 2π m / (n h)` for the signed frequency index `m`. With outward normals χ is
+//! **lower inside** the surface. `σ` is given in voxels of the grid being solved (`σ = 1`, as
+//! measured in `notes/adfft.md`). The forward transform is unnormalised; the inverse divides by
+//! `n³`. Node `i` of a grid sits at `origin + h·i` (values are node samples, never cell
+//! centres: reading them as cell centres shifts the surface by half a voxel).
+
+use std::sync::Arc;
+
+use rayon::prelude::*;
+use rustfft::num_complex::Complex32;
+use rustfft::{Fft, FftPlanner};
+
+/// A periodic grid of `n` nodes per axis.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LocalGrid {
+    /// Nodes per axis.
+    pub n: usize,
+    /// Node spacing (world units).
+    pub h: f64,
+    /// Position of node (0, 0, 0).
+    pub origin: [f64; 3],
+}
+
+impl LocalGrid {
+    /// Number of nodes.
+    pub fn len(&self) -> usize {
+        self.n * self.n * self.n
+    }
+
+    /// True for a grid without nodes.
+    pub fn is_empty(&self) -> bool {
+        self.n == 0
+    }
+
+    /// Bytes of scratch [`solve`] needs: the field (4 bytes a node), the splatted normals
+    /// (12) and two complex buffers for the transform (16).
+    pub fn scratch_bytes(&self) -> u64 {
+        self.len() as u64 * 32
+    }
+
+    /// Trilinear interpolation of node values `v` at world point `p` (periodic).
+    #[inline]
+    pub fn eval(&self, v: &[f32], p: [f64; 3]) -> f64 {
+        let n = self.n as i64;
+        let mut i0 = [0i64; 3];
+        let mut f = [0f64; 3];
+        for a in 0..3 {
+            let u = (p[a] - self.origin[a]) / self.h;
+            let fl = u.floor();
+            i0[a] = fl as i64;
+            f[a] = u - fl;
+        }
+        let idx = |x: i64, y: i64, z: i64| {
+            let w = |c: i64| c.rem_euclid(n) as usize;
+            (w(z) * self.n + w(y)) * self.n + w(x)
+        };
+        let mut acc = 0.0;
+        for c in 0..8 {
+            let (dx, dy, dz) = (c & 1, (c >> 1) & 1, (c >> 2) & 1);
+            let w = (if dx == 1 { f[0] } else { 1.0 - f[0] })
+                * (if dy == 1 { f[1] } else { 1.0 - f[1] })
+                * (if dz == 1 { f[2] } else { 1.0 - f[2] });
+            acc += w * v[idx(i0[0] + dx, i0[1] + dy, i0[2] + dz)] as f64;
+        }
+        acc
+    }
+}
+
+/// Solve for the smoothed indicator on `grid` from points `pos` with outward unit normals
+/// `nrm`; returns node values (x fastest). `sigma_vox` is the Gaussian width in voxels.
+pub fn solve(grid: &LocalGrid, pos: &[[f64; 3]], nrm: &[[f32; 3]], sigma_vox: f64) -> Vec<f32> {
+    let mut v = vec![[0f32; 3]; grid.len()];
+    splat(grid, pos, nrm, &mut v);
+    solve_splatted(grid, v, sigma_vox)
+}
+
+/// Add the normals of `pos`/`nrm` to `v` (one `[f32; 3]` per node) as a density.
+pub fn splat(grid: &LocalGrid, pos: &[[f64; 3]], nrm: &[[f32; 3]], v: &mut [[f32; 3]]) {
+    let n = grid.n;
+    let inv_h = 1.0 / grid.h;
+    let scale = (inv_h * inv_h * inv_h) as f32;
+    let ni = n as i64;
+    for (p, nn) in pos.iter().zip(nrm) {
+        let mut i0 = [0i64; 3];
+        let mut f = [0f32; 3];
+        for a in 0..3 {
+            let u = (p[a] - grid.origin[a]) * inv_h;
+            let fl = u.floor();
+            i0[a] = fl as i64;
+            f[a] = (u - fl) as f32;
+        }
+        for c in 0..8usize {
+            let (dx, dy, dz) = ((c & 1) as i64, ((c >> 1) & 1) as i64, ((c >> 2) & 1) as i64);
+            let w = (if dx == 1 { f[0] } else { 1.0 - f[0] })
+                * (if dy == 1 { f[1] } else { 1.0 - f[1] })
+                * (if dz == 1 { f[2] } else { 1.0 - f[2] })
+                * scale;
+            let x = (i0[0] + dx).rem_euclid(ni) as usize;
+            let y = (i0[1] + dy).rem_euclid(ni) as usize;
+            let z = (i0[2] + dz).rem_euclid(ni) as usize;
+            let cell = &mut v[(z * n + y) * n + x];
+            cell[0] += w * nn[0];
+            cell[1] += w * nn[1];
+            cell[2] += w * nn[2];
+        }
+    }
+}
+
+/// Solve from splatted normals (consumed).
+pub fn solve_splatted(grid: &LocalGrid, v: Vec<[f32; 3]>, sigma_vox: f64) -> Vec<f32> {
+    let n = grid.n;
+    let len = grid.len();
+    let inv_h = 1.0 / grid.h;
+    // Divergence by central differences.
+    let half_inv_h = (0.5 * inv_h) as f32;
+    let mut buf = vec![Complex32::new(0.0, 0.0); len];
+    buf.par_chunks_mut(n * n).enumerate().for_each(|(z, slab)| {
+        let zp = (z + 1) % n;
+        let zm = (z + n - 1) % n;
+        for y in 0..n {
+            let yp = (y + 1) % n;
+            let ym = (y + n - 1) % n;
+            for x in 0..n {
+                let xp = (x + 1) % n;
+                let xm = (x + n - 1) % n;
+                let at = |x: usize, y: usize, z: usize| (z * n + y) * n + x;
+                let d = (v[at(xp, y, z)][0] - v[at(xm, y, z)][0])
+                    + (v[at(x, yp, z)][1] - v[at(x, ym, z)][1])
+                    + (v[at(x, y, zp)][2] - v[at(x, y, zm)][2]);
+                slab[y * n + x] = Complex32::new(d * half_inv_h, 0.0);
+            }
+        }
+    });
+    drop(v);
+    let mut planner = FftPlanner::<f32>::new();
+    let fwd = planner.plan_fft_forward(n);
+    let inv = planner.plan_fft_inverse(n);
+    fft3(&mut buf, n, &fwd);
+    // Apply −G_σ/|k|².
+    let two_pi_over_l = 2.0 * std::f64::consts::PI / (n as f64 * grid.h);
+    let sigma = sigma_vox * grid.h;
+    let k2: Vec<f64> = (0..n)
+        .map(|m| {
+            let s = if m <= n / 2 {
+                m as f64
+            } else {
+                m as f64 - n as f64
+            };
+            let k = s * two_pi_over_l;
+            k * k
+        })
+        .collect();
+    buf.par_chunks_mut(n * n).enumerate().for_each(|(z, slab)| {
+        for y in 0..n {
+            for x in 0..n {
+                let kk = k2[x] + k2[y] + k2[z];
+                let c = &mut slab[y * n + x];
+                if kk == 0.0 {
+                    *c = Complex32::new(0.0, 0.0);
+                } else {
+                    let g = (-(0.5 * sigma * sigma * kk)).exp() / kk;
+                    *c *= -(g as f32);
+                }
+            }
+        }
+    });
+    fft3(&mut buf, n, &inv);
+    let norm = 1.0 / len as f32;
+    buf.iter().map(|c| c.re * norm).collect()
+}
+
+/// In-place 3D FFT of an `n³` cube (x fastest) with the 1D plan `fft` along each axis.
+pub fn fft3(data: &mut [Complex32], n: usize, fft: &Arc<dyn Fft<f32>>) {
+    let scratch_len = fft.get_inplace_scratch_len();
+    // x: rows are contiguous.
+    data.par_chunks_mut(n * n).for_each_init(
+        || vec![Complex32::new(0.0, 0.0); scratch_len],
+        |s, slab| fft.process_with_scratch(slab, s),
+    );
+    // y: transpose each z-slab, transform rows, transpose back.
+    data.par_chunks_mut(n * n).for_each_init(
+        || vec![Complex32::new(0.0, 0.0); scratch_len],
+        |s, slab| {
+            transpose_square(slab, n);
+            fft.process_with_scratch(slab, s);
+            transpose_square(slab, n);
+        },
+    );
+    // z: out-of-place transpose (z, y, x) -> (y, x, z), transform rows, transpose back.
+    let mut t = vec![Complex32::new(0.0, 0.0); data.len()];
+    {
+        let src: &[Complex32] = data;
+        t.par_chunks_mut(n * n).enumerate().for_each(|(y, slab)| {
+            for x in 0..n {
+                for z in 0..n {
+                    slab[x * n + z] = src[(z * n + y) * n + x];
+                }
+            }
+        });
+    }
+    t.par_chunks_mut(n * n).for_each_init(
+        || vec![Complex32::new(0.0, 0.0); scratch_len],
+        |s, slab| fft.process_with_scratch(slab, s),
+    );
+    let src: &[Complex32] = &t;
+    data.par_chunks_mut(n * n)
+        .enumerate()
+        .for_each(|(z, slab)| {
+            for y in 0..n {
+                for x in 0..n {
+                    slab[y * n + x] = src[(y * n + x) * n + z];
+                }
+            }
+        });
+}
+
+fn transpose_square(m: &mut [Complex32], n: usize) {
+    for i in 0..n {
+        for j in (i + 1)..n {
+            m.swap(i * n + j, j * n + i);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn naive_dft3(data: &[Complex32], n: usize) -> Vec<Complex32> {
+        let mut out = vec![Complex32::new(0.0, 0.0); data.len()];
+        for kz in 0..n {
+            for ky in 0..n {
+                for kx in 0..n {
+                    let mut acc = rustfft::num_complex::Complex64::new(0.0, 0.0);
+                    for z in 0..n {
+                        for y in 0..n {
+                            for x in 0..n {
+                                let ph = -2.0
+                                    * std::f64::consts::PI
+                                    * ((kx * x + ky * y + kz * z) as f64)
+                                    / n as f64;
+                                let v = data[(z * n + y) * n + x];
+                                acc +=
+                                    rustfft::num_complex::Complex64::new(v.re as f64, v.im as f64)
+                                        * rustfft::num_complex::Complex64::from_polar(1.0, ph);
+                            }
+                        }
+                    }
+                    out[(kz * n + ky) * n + kx] = Complex32::new(acc.re as f32, acc.im as f32);
+                }
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn fft3_matches_naive_dft() {
+        let n = 6;
+        let data: Vec<Complex32> = (0..n * n * n)
+            .map(|i| Complex32::new(((i * 37) % 11) as f32 - 5.0, ((i * 17) % 7) as f32))
+            .collect();
+        let mut d = data.clone();
+        let fwd = FftPlanner::<f32>::new().plan_fft_forward(n);
+        fft3(&mut d, n, &fwd);
+        let want = naive_dft3(&data, n);
+        for (a, b) in d.iter().zip(&want) {
+            assert!((a - b).norm() < 1e-3, "{a} vs {b}");
+        }
+    }
+
+    #[test]
+    fn sphere_indicator_is_lower_inside_and_level_set_is_the_sphere() {
+        // Dense exact samples of a sphere of radius 0.5 in a periodic box of side 2.
+        let n = 64;
+        let grid = LocalGrid {
+            n,
+            h: 2.0 / n as f64,
+            origin: [-1.0; 3],
+        };
+        let mut pos = Vec::new();
+        let mut nrm = Vec::new();
+        let m = 300;
+        for i in 0..m {
+            for j in 0..(2 * m) {
+                let th = std::f64::consts::PI * (i as f64 + 0.5) / m as f64;
+                let ph = std::f64::consts::PI * j as f64 / m as f64;
+                let d = [th.sin() * ph.cos(), th.sin() * ph.sin(), th.cos()];
+                // Area weight by repetition is not needed: sin(θ) density; keep uniform in area
+                // by subsampling near the poles.
+                if (i * 7919 + j * 104729) % 1000 >= (th.sin() * 1000.0) as usize {
+                    continue;
+                }
+                pos.push([0.5 * d[0], 0.5 * d[1], 0.5 * d[2]]);
+                nrm.push([d[0] as f32, d[1] as f32, d[2] as f32]);
+            }
+        }
+        let f = solve(&grid, &pos, &nrm, 1.0);
+        let iso: f64 = pos.iter().map(|p| grid.eval(&f, *p)).sum::<f64>() / pos.len() as f64;
+        let inside = grid.eval(&f, [0.0, 0.0, 0.0]);
+        let outside = grid.eval(&f, [0.9, 0.9, 0.9]);
+        assert!(inside < iso && outside > iso, "{inside} {iso} {outside}");
+        // Along a ray the field crosses iso within a fraction of a voxel of r = 0.5.
+        for d in [[1.0, 0.0, 0.0], [0.0, 0.6, 0.8], [0.577, 0.577, 0.577]] {
+            let mut lo = 0.3;
+            let mut hi = 0.7;
+            for _ in 0..40 {
+                let mid = 0.5 * (lo + hi);
+                let v = grid.eval(&f, [mid * d[0], mid * d[1], mid * d[2]]);
+                if v < iso { lo = mid } else { hi = mid }
+            }
+            assert!((lo - 0.5).abs() < 0.3 * grid.h, "crossing at {lo}");
+        }
+    }
+}
