@@ -93,6 +93,11 @@ pub trait PointReader: Send + Sync {
     fn header_bounds(&self) -> Option<crate::types::Aabb> {
         None
     }
+    /// True when every coordinate is stored as a float32 (or a narrower integer), so that
+    /// f32 holds it exactly.
+    fn positions_f32(&self) -> bool {
+        false
+    }
     /// Split the points into chunks of about `target_points` points each, in file order.
     /// Chunks cover every point exactly once.
     fn chunks(&self, target_points: u64) -> Result<Vec<ChunkSpec>>;

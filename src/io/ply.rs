@@ -899,6 +899,17 @@ impl PointReader for PlyReader {
         self.header.elements[self.vertex].count
     }
 
+    fn positions_f32(&self) -> bool {
+        self.layout.xyz.is_some_and(|f| {
+            f.iter().all(|f| {
+                matches!(
+                    f.ty,
+                    Scalar::F32 | Scalar::I8 | Scalar::U8 | Scalar::I16 | Scalar::U16
+                )
+            })
+        })
+    }
+
     fn chunks(&self, target_points: u64) -> Result<Vec<ChunkSpec>> {
         let target = target_points.max(1);
         let total = self.len();

@@ -4,7 +4,7 @@
 //!
 //! | field | type | bytes |
 //! | --- | --- | --- |
-//! | x y z | f64 ×3 | 24 |
+//! | x y z | f64 ×3, or f32 ×3 where every input coordinate is a float32 | 24 or 12 |
 //! | nx ny nz | f32 ×3 | 12 |
 //! | red green blue | u16 ×3 | 6 |
 //! | alpha | u16 | 2 |
@@ -25,14 +25,16 @@ use crate::types::{Aabb, Attributes, PointBatch};
 pub struct RecordLayout {
     /// Attributes carried.
     pub attrs: Attributes,
+    /// Positions stored as f32 (exact: every input coordinate was a float32).
+    pub pos_f32: bool,
     /// Bytes per record.
     pub stride: usize,
 }
 
 impl RecordLayout {
-    /// The layout for `attrs`.
-    pub fn new(attrs: Attributes) -> RecordLayout {
-        let mut stride = 24;
+    /// The layout for `attrs`, with f32 positions when `pos_f32`.
+    pub fn new(attrs: Attributes, pos_f32: bool) -> RecordLayout {
+        let mut stride = if pos_f32 { 12 } else { 24 };
         if attrs.normal {
             stride += 12;
         }
@@ -48,7 +50,11 @@ impl RecordLayout {
         if attrs.confidence {
             stride += 4;
         }
-        RecordLayout { attrs, stride }
+        RecordLayout {
+            attrs,
+            pos_f32,
+            stride,
+        }
     }
 
     /// Append point `i` of `b` to `out`.
@@ -63,11 +69,18 @@ impl RecordLayout {
     #[inline(always)]
     pub fn encode_into(&self, b: &PointBatch, i: usize, r: &mut [u8]) {
         let p = b.pos[i];
-        r[0..8].copy_from_slice(&p[0].to_le_bytes());
-        r[8..16].copy_from_slice(&p[1].to_le_bytes());
-        r[16..24].copy_from_slice(&p[2].to_le_bytes());
+        let mut o = if self.pos_f32 {
+            r[0..4].copy_from_slice(&(p[0] as f32).to_le_bytes());
+            r[4..8].copy_from_slice(&(p[1] as f32).to_le_bytes());
+            r[8..12].copy_from_slice(&(p[2] as f32).to_le_bytes());
+            12
+        } else {
+            r[0..8].copy_from_slice(&p[0].to_le_bytes());
+            r[8..16].copy_from_slice(&p[1].to_le_bytes());
+            r[16..24].copy_from_slice(&p[2].to_le_bytes());
+            24
+        };
         let a = self.attrs;
-        let mut o = 24;
         if a.normal {
             let n = b.normal[i];
             r[o..o + 4].copy_from_slice(&n[0].to_le_bytes());
@@ -102,8 +115,17 @@ impl RecordLayout {
         let u16_at = |r: &[u8], o: usize| u16::from_le_bytes(arr(&r[o..o + 2]));
         let a = self.attrs;
         for r in bytes.chunks_exact(self.stride) {
-            out.pos.push([f64_at(r, 0), f64_at(r, 8), f64_at(r, 16)]);
-            let mut o = 24;
+            let mut o = if self.pos_f32 {
+                out.pos.push([
+                    f32_at(r, 0) as f64,
+                    f32_at(r, 4) as f64,
+                    f32_at(r, 8) as f64,
+                ]);
+                12
+            } else {
+                out.pos.push([f64_at(r, 0), f64_at(r, 8), f64_at(r, 16)]);
+                24
+            };
             if a.normal {
                 out.normal
                     .push([f32_at(r, o), f32_at(r, o + 4), f32_at(r, o + 8)]);
@@ -257,10 +279,11 @@ mod tests {
                 ..Default::default()
             },
         ] {
-            let l = RecordLayout::new(attrs);
+            let l = RecordLayout::new(attrs, attrs.normal);
             let mut b = PointBatch::default();
             for i in 0..5 {
-                b.pos.push([i as f64, -1.5 * i as f64, 1e300]);
+                let big = if l.pos_f32 { 2f64.powi(100) } else { 1e300 };
+                b.pos.push([i as f64, -1.5 * i as f64, big]);
                 if attrs.normal {
                     b.normal.push([0.0, 1.0, i as f32]);
                 }

@@ -28,6 +28,8 @@ pub struct Manifest {
     pub skipped_invalid: u64,
     /// Attributes of every record.
     pub attributes: Attributes,
+    /// Positions stored as f32 (every input coordinate was a float32), else f64.
+    pub position_f32: bool,
     /// Bytes per record.
     pub record_bytes: usize,
     /// Record fields in order, with types (see `cell_file`).

@@ -1,15 +1,18 @@
 //! Ingest and the on-disk octree store (DESIGN.md step 1).
 //!
-//! `ingest` reads the memory-mapped inputs in passes, each a parallel map over chunks:
+//! `ingest` reads the memory-mapped inputs in two passes, each a parallel map over chunks:
 //!
-//! 1. **bounds** (skipped when every input's header gives bounds, as LAS headers do): the
-//!    bounding box, and every coordinate checked finite;
-//! 2. **count**: each point's cell on a counting grid of `8^L` cells over the root cube, `L`
-//!    sized from the point count ([`octree::count_levels`]) and the budget; the grid is cut
-//!    into a hierarchy of cells of at most `--max-cell-points` points ([`octree::Hierarchy`]);
-//! 3. **scatter**: points grouped by cell and appended to per-cell buffers that are flushed
-//!    as zstd frames of fixed-width records ([`cell_file`]);
-//! 4. **split**: a grid cell still over the limit is counted again on a finer grid of its own
+//! 0. **provisional bounds**: the headers' where every input has them (LAS), else the bounds
+//!    of a fixed sample of about 1/64 of the chunks; the root cube is that box enlarged 10%;
+//! 1. **count**: each point's cell on a counting grid of `8^L` cells over the root cube, `L`
+//!    sized from the point count ([`octree::count_levels`]) and the budget, while the exact
+//!    bounds are measured and every coordinate checked finite. Only if the exact bounds leave
+//!    the cube with less than half its margin is the count repeated on the exact cube. The
+//!    grid is cut into a hierarchy of cells of at most `--max-cell-points` points
+//!    ([`octree::Hierarchy`]);
+//! 2. **scatter**: points grouped by cell and appended to per-cell buffers that are flushed
+//!    as zstd frames of fixed-width records ([`cell_file`]), written by a writer thread;
+//! 3. **split**: a grid cell still over the limit is counted again on a finer grid of its own
 //!    and scattered into its sub-cells.
 //!
 //! The store is built in a temporary directory next to the destination; `manifest.json` is
@@ -155,7 +158,13 @@ pub fn ingest(
             );
         }
     }
-    let layout = RecordLayout::new(attrs);
+    // Positions are kept as f32 when that is exact: every input stores float32 coordinates
+    // and none is transformed. Records shrink from 36 to 24 bytes for an oriented cloud.
+    let pos_f32 = readers
+        .iter()
+        .zip(inputs)
+        .all(|(r, i)| r.positions_f32() && i.transform.is_identity());
+    let layout = RecordLayout::new(attrs, pos_f32);
 
     // Temporary directory next to the destination.
     let parent = match out.parent() {
@@ -211,47 +220,45 @@ pub fn ingest(
         Ok(st.skipped_invalid)
     };
 
-    // Pass 1: bounds (unless every header has them).
+    // Provisional bounds: the headers' (LAS), else a deterministic sample of chunks. The
+    // count pass then measures the exact bounds; only when they leave the provisional cube
+    // (keeping less than half its margin) is the count repeated on the exact cube, so that
+    // ingest reads typical inputs twice, not three times.
     let header_bounds: Option<Aabb> = readers
         .iter()
         .zip(inputs)
         .map(|(r, i)| r.header_bounds().map(|b| transform_box(&b, i)))
         .try_fold(Aabb::EMPTY, |acc, b| b.map(|b| acc.union(&b)));
-    let (cube_bounds, skipped) = match header_bounds {
-        Some(b) => (b, None),
+    let provisional = match header_bounds {
+        Some(b) => b,
         None => {
-            let stage = ctx.progress.stage("bounds", Some(total), "points");
-            let res: Vec<Result<(Aabb, u64)>> = ctx.pool.install(|| {
-                chunks
+            let want = (chunks.len() / 64).max(8);
+            let stride = (chunks.len() / want).max(1);
+            let sample: Vec<&(usize, ChunkSpec)> = chunks
+                .iter()
+                .enumerate()
+                .filter(|(i, _)| i % stride == 0 || *i + 1 == chunks.len())
+                .map(|(_, c)| c)
+                .collect();
+            let res: Vec<Result<Aabb>> = ctx.pool.install(|| {
+                sample
                     .par_iter()
                     .map_init(PointBatch::default, |batch, (ri, spec)| {
                         let _permit = budget.acquire(chunk_bytes, "a chunk of points")?;
-                        let skipped = load(batch, *ri, spec)?;
-                        stage.inc(spec.count);
-                        Ok((cell_file::batch_bounds(batch), skipped))
+                        load(batch, *ri, spec)?;
+                        Ok(cell_file::batch_bounds(batch))
                     })
                     .collect()
             });
             let mut b = Aabb::EMPTY;
-            let mut s = 0;
             for r in res {
-                let (bb, sk) = r?;
-                b = b.union(&bb);
-                s += sk;
+                b = b.union(&r?);
             }
-            stage.finish(None);
-            (b, Some(s))
+            b
         }
     };
-    if cube_bounds.is_empty() {
-        return Err(Error::input(
-            &inputs[0].path,
-            "no valid points: every point has a non-finite coordinate",
-        ));
-    }
-    let cube = Cube::around(&cube_bounds, CUBE_MARGIN);
 
-    // Pass 2: count.
+    // Pass 1: count (and exact bounds).
     let max_levels_by_mem = {
         let mut l = 7u32;
         while l > 1 && (8u64 << (3 * l)) * 9 / 8 > budget.total() / 4 {
@@ -262,42 +269,71 @@ pub fn ingest(
     let levels = octree::count_levels(total, params.max_cell_points, max_levels_by_mem);
     let grid_cells = 1usize << (3 * levels);
     let grid_permit = budget.acquire(grid_cells as u64 * 8 * 9 / 8 * 2, "the counting grid")?;
-    let counts: Vec<AtomicU64> = (0..grid_cells).map(|_| AtomicU64::new(0)).collect();
-    let root_map = GridMap::new(&cube, CellKey::ROOT, levels);
-    let stage = ctx.progress.stage("count", Some(total), "points");
-    let res: Vec<Result<(Aabb, u64)>> = ctx.pool.install(|| {
-        chunks
-            .par_iter()
-            .map_init(PointBatch::default, |batch, (ri, spec)| {
-                let _permit = budget.acquire(chunk_bytes, "a chunk of points")?;
-                let skipped = load(batch, *ri, spec)?;
-                for p in &batch.pos {
-                    counts[root_map.index(*p) as usize].fetch_add(1, Ordering::Relaxed);
-                }
-                stage.inc(spec.count);
-                Ok((cell_file::batch_bounds(batch), skipped))
-            })
-            .collect()
-    });
-    let mut bounds = Aabb::EMPTY;
-    let mut s = 0;
-    for r in res {
-        let (bb, sk) = r?;
-        bounds = bounds.union(&bb);
-        s += sk;
+    let count = |cube: &Cube| -> Result<(Vec<u64>, Aabb, u64)> {
+        let counts: Vec<AtomicU64> = (0..grid_cells).map(|_| AtomicU64::new(0)).collect();
+        let root_map = GridMap::new(cube, CellKey::ROOT, levels);
+        let stage = ctx.progress.stage("count", Some(total), "points");
+        let res: Vec<Result<(Aabb, u64)>> = ctx.pool.install(|| {
+            chunks
+                .par_iter()
+                .map_init(PointBatch::default, |batch, (ri, spec)| {
+                    let _permit = budget.acquire(chunk_bytes, "a chunk of points")?;
+                    let skipped = load(batch, *ri, spec)?;
+                    for p in &batch.pos {
+                        counts[root_map.index(*p) as usize].fetch_add(1, Ordering::Relaxed);
+                    }
+                    stage.inc(spec.count);
+                    Ok((cell_file::batch_bounds(batch), skipped))
+                })
+                .collect()
+        });
+        let mut bounds = Aabb::EMPTY;
+        let mut s = 0;
+        for r in res {
+            let (bb, sk) = r?;
+            bounds = bounds.union(&bb);
+            s += sk;
+        }
+        stage.finish(None);
+        Ok((
+            counts.into_iter().map(|c| c.into_inner()).collect(),
+            bounds,
+            s,
+        ))
+    };
+    let mut cube = Cube::around(&provisional, CUBE_MARGIN);
+    let (mut counts, mut bounds, mut skipped) = if provisional.is_empty() {
+        (Vec::new(), Aabb::EMPTY, 0)
+    } else {
+        count(&cube)?
+    };
+    if !bounds.is_empty() && !within(&bounds, &Cube::around(&provisional, CUBE_MARGIN / 2.0)) {
+        log::info!("the points reach beyond the sampled bounds; counting again on the exact cube");
+        cube = Cube::around(&bounds, CUBE_MARGIN);
+        (counts, bounds, skipped) = count(&cube)?;
+    } else if provisional.is_empty() {
+        // Every sampled point was invalid: count on the exact bounds found by a full pass.
+        let (_, b, _) = count(&Cube::around(
+            &Aabb {
+                min: [0.0; 3],
+                max: [1.0; 3],
+            },
+            0.0,
+        ))?;
+        if !b.is_empty() {
+            cube = Cube::around(&b, CUBE_MARGIN);
+            (counts, bounds, skipped) = count(&cube)?;
+        }
     }
-    stage.finish(None);
-    let skipped = skipped.unwrap_or(s);
-    let counts: Vec<u64> = counts.into_iter().map(|c| c.into_inner()).collect();
-    let hier = Hierarchy::build(CellKey::ROOT, levels, &counts, params.max_cell_points);
-    drop(counts);
-    drop(grid_permit);
     if bounds.is_empty() {
         return Err(Error::input(
             &inputs[0].path,
             "no valid points: every point has a non-finite coordinate",
         ));
     }
+    let hier = Hierarchy::build(CellKey::ROOT, levels, &counts, params.max_cell_points);
+    drop(counts);
+    drop(grid_permit);
 
     // Pass 3: scatter.
     let cap = (budget.total() / 8) as usize;
@@ -428,7 +464,8 @@ pub fn ingest(
         skipped_invalid: skipped,
         attributes: attrs,
         record_bytes: layout.stride,
-        record_fields: record_fields(attrs),
+        record_fields: record_fields(attrs, pos_f32),
+        position_f32: pos_f32,
         compression: "zstd".into(),
         bounds,
         cube,
@@ -468,8 +505,9 @@ pub fn ingest(
     })
 }
 
-fn record_fields(a: Attributes) -> Vec<String> {
-    let mut v: Vec<String> = ["x:f64", "y:f64", "z:f64"].map(String::from).to_vec();
+fn record_fields(a: Attributes, pos_f32: bool) -> Vec<String> {
+    let t = if pos_f32 { "f32" } else { "f64" };
+    let mut v: Vec<String> = ["x", "y", "z"].map(|c| format!("{c}:{t}")).to_vec();
     if a.normal {
         v.extend(["nx:f32", "ny:f32", "nz:f32"].map(String::from));
     }
@@ -486,6 +524,11 @@ fn record_fields(a: Attributes) -> Vec<String> {
         v.push("confidence:f32".into());
     }
     v
+}
+
+/// True when `b` lies inside cube `c`.
+fn within(b: &Aabb, c: &Cube) -> bool {
+    (0..3).all(|a| b.min[a] >= c.origin[a] && b.max[a] <= c.origin[a] + c.size)
 }
 
 /// The box holding `b` after the input's transform.
@@ -658,7 +701,7 @@ impl Store {
     /// Open a store and check its manifest.
     pub fn open(dir: &Path) -> Result<Store> {
         let manifest = Manifest::load(dir)?;
-        let layout = RecordLayout::new(manifest.attributes);
+        let layout = RecordLayout::new(manifest.attributes, manifest.position_f32);
         if layout.stride != manifest.record_bytes {
             return Err(Error::input(
                 dir.join(MANIFEST),

@@ -56,21 +56,15 @@ pub fn group(
     out.bytes.clear();
     out.bytes.resize(leaf.len() * stride, 0);
     let mut next = start;
+    let mut group_of = vec![0u32; leaves];
+    for (gi, g) in out.groups.iter().enumerate() {
+        group_of[g.0 as usize] = gi as u32;
+    }
     for (i, &l) in leaf.iter().enumerate() {
         let slot = next[l as usize];
         next[l as usize] += 1;
         layout.encode_into(b, i, &mut out.bytes[slot * stride..(slot + 1) * stride]);
-    }
-    // Bounds per group, from the records' positions in place.
-    for g in &mut out.groups {
-        for r in out.bytes[g.1..g.2].chunks_exact(stride) {
-            let f = |o: usize| {
-                let mut a = [0u8; 8];
-                a.copy_from_slice(&r[o..o + 8]);
-                f64::from_le_bytes(a)
-            };
-            g.4.add([f(0), f(8), f(16)]);
-        }
+        out.groups[group_of[l as usize] as usize].4.add(b.pos[i]);
     }
 }
 
@@ -288,7 +282,7 @@ mod tests {
 
     #[test]
     fn groups_keep_input_order() {
-        let layout = RecordLayout::new(Attributes::default());
+        let layout = RecordLayout::new(Attributes::default(), false);
         let b = PointBatch {
             pos: (0..6).map(|i| [i as f64, 0.0, 0.0]).collect(),
             ..Default::default()

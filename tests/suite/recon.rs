@@ -245,3 +245,57 @@ fn bad_reconstruct_input() {
         assert!(!d.path().join(o).exists());
     }
 }
+
+#[test]
+fn killed_run_resumes_to_the_same_bytes() {
+    let d = tempfile::tempdir().unwrap();
+    let ply = synth(d.path(), "bumpy", 200_000, 0.0005);
+    let whole = d.path().join("whole.ply");
+    recon(&ply, &whole, &["--depth", "8"]);
+    let out = d.path().join("resumed.ply");
+    let work = d.path().join("work");
+    let mut child = bin()
+        .args([
+            "reconstruct",
+            s(&ply),
+            "-o",
+            s(&out),
+            "--depth",
+            "8",
+            "--work-dir",
+            s(&work),
+            "--progress",
+            "none",
+        ])
+        .spawn()
+        .unwrap();
+    // Kill it (SIGKILL) as soon as some leaves are checkpointed.
+    let leaves = work.join("leaves");
+    let t0 = std::time::Instant::now();
+    let mut killed = false;
+    while t0.elapsed() < std::time::Duration::from_secs(120) {
+        let n = std::fs::read_dir(&leaves).map(|r| r.count()).unwrap_or(0);
+        if n >= 20 {
+            child.kill().unwrap();
+            killed = true;
+            break;
+        }
+        if child.try_wait().unwrap().is_some() {
+            break;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    let _ = child.wait();
+    assert!(killed, "the run ended before it could be killed");
+    assert!(
+        !out.exists(),
+        "a killed run left a file under the final name"
+    );
+    let o = recon(
+        &ply,
+        &out,
+        &["--depth", "8", "--work-dir", s(&work), "--resume"],
+    );
+    assert!(o.contains("reconstructed"), "{o}");
+    assert_eq!(std::fs::read(&whole).unwrap(), std::fs::read(&out).unwrap());
+}
