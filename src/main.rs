@@ -101,6 +101,16 @@ enum Cmd {
         /// Keep the work directory after success.
         #[arg(long)]
         keep_work: bool,
+        /// Refine a leaf only where its samples are farther than this (relative to the
+        /// bounding-box diagonal) from the coarse solution's surface.
+        #[arg(long, default_value_t = scanflow::recon::DEFAULT_ERROR)]
+        error: f64,
+        /// Refine only leaves holding at least this many points.
+        #[arg(long, default_value_t = scanflow::recon::DEFAULT_MIN_POINTS)]
+        min_points: u64,
+        /// Leave the surface open where no input point supports it.
+        #[arg(long)]
+        trim: bool,
         #[command(flatten)]
         common: Common,
     },
@@ -256,27 +266,37 @@ fn run(cli: Cli) -> Result<()> {
             work_dir,
             resume,
             keep_work,
+            error,
+            min_points,
+            trim,
             common,
         } => {
             let ctx = ctx(&common)?;
-            let st = reconstruct(
-                &ctx,
-                &inputs,
-                conf.as_deref(),
-                &output,
-                depth,
-                tile,
-                work_dir,
-                resume,
-                keep_work,
-            )?;
+            if !(error >= 0.0 && error.is_finite()) {
+                anyhow::bail!(
+                    "--error {error}: expected a non-negative number (relative to the bounding-box diagonal)"
+                );
+            }
+            let work = work_dir.unwrap_or_else(|| {
+                let mut s = output.as_os_str().to_owned();
+                s.push(".work");
+                PathBuf::from(s)
+            });
+            let mut params = scanflow::recon::ReconParams::new(depth, work);
+            params.tile_voxels = tile;
+            params.resume = resume;
+            params.error = error;
+            params.min_points = min_points;
+            params.trim = trim;
+            let st = reconstruct(&ctx, &inputs, conf.as_deref(), &output, params, keep_work)?;
             println!(
-                "reconstructed {} vertices, {} triangles into {} in {:.2} s ({} leaves, iso {:.4}), peak memory {}",
+                "reconstructed {} vertices, {} triangles into {} in {:.2} s ({} leaves, {} refined, iso {:.4}), peak memory {}",
                 st.vertices,
                 st.faces,
                 output.display(),
                 st.secs,
                 st.leaves,
+                st.leaves_refined,
                 st.iso,
                 human_bytes(peak_rss_bytes())
             );
@@ -333,17 +353,8 @@ fn run(cli: Cli) -> Result<()> {
                 "synthesised {} points of a bumpy sphere (noise 0.001) in {:.2} s",
                 rep.points, rep.secs
             );
-            let st = reconstruct(
-                &ctx,
-                std::slice::from_ref(&ply),
-                None,
-                &mesh,
-                9,
-                None,
-                Some(work),
-                false,
-                false,
-            )?;
+            let params = scanflow::recon::ReconParams::new(9, work);
+            let st = reconstruct(&ctx, std::slice::from_ref(&ply), None, &mesh, params, false)?;
             let total = t0.elapsed().as_secs_f64();
             let check = scanflow::metrics::run_check(
                 &mesh,
@@ -394,23 +405,16 @@ fn synth(
     Ok(r)
 }
 
-#[allow(clippy::too_many_arguments)]
 fn reconstruct(
     ctx: &Ctx,
     inputs: &[PathBuf],
     conf: Option<&Path>,
     output: &Path,
-    depth: u32,
-    tile: Option<u64>,
-    work_dir: Option<PathBuf>,
-    resume: bool,
+    params: scanflow::recon::ReconParams,
     keep_work: bool,
 ) -> Result<scanflow::recon::ReconStats> {
-    let work = work_dir.unwrap_or_else(|| {
-        let mut s = output.as_os_str().to_owned();
-        s.push(".work");
-        PathBuf::from(s)
-    });
+    let work = params.work_dir.clone();
+    let resume = params.resume;
     // One directory argument is a store; anything else is ingested into the work dir.
     let store_dir = if conf.is_none() && inputs.len() == 1 && inputs[0].is_dir() {
         inputs[0].clone()
@@ -426,18 +430,16 @@ fn reconstruct(
             }
             std::fs::create_dir_all(&work)
                 .with_context(|| format!("{}: cannot create the work directory", work.display()))?;
-            scanflow::store::ingest(&specs, &dir, &IngestParams::default(), ctx)?;
+            // Small cells: leaves read the store cells around them through a small cache.
+            let ingest = IngestParams {
+                max_cell_points: 1 << 18,
+                ..Default::default()
+            };
+            scanflow::store::ingest(&specs, &dir, &ingest, ctx)?;
         }
         dir
     };
     let store = Store::open(&store_dir)?;
-    let params = scanflow::recon::ReconParams {
-        depth,
-        sigma_vox: 1.0,
-        tile_voxels: tile,
-        work_dir: work.clone(),
-        resume,
-    };
     let st = scanflow::recon::reconstruct(&store, output, &params, ctx)?;
     if !keep_work {
         std::fs::remove_dir_all(&work)

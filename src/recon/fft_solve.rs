@@ -45,10 +45,11 @@ impl LocalGrid {
         self.n == 0
     }
 
-    /// Bytes of scratch [`solve`] needs: the field (4 bytes a node), the splatted normals
-    /// (12) and two complex buffers for the transform (16).
+    /// Bytes of scratch [`solve`] needs at its peak: the splatted normals (12 bytes a node)
+    /// and their divergence (4); the complex transform buffer (8) comes after the splat is
+    /// dropped, the result (4) after the divergence is.
     pub fn scratch_bytes(&self) -> u64 {
-        self.len() as u64 * 32
+        self.len() as u64 * 16
     }
 
     /// Trilinear interpolation of node values `v` at world point `p` (periodic).
@@ -124,10 +125,11 @@ pub fn solve_splatted(grid: &LocalGrid, v: Vec<[f32; 3]>, sigma_vox: f64) -> Vec
     let n = grid.n;
     let len = grid.len();
     let inv_h = 1.0 / grid.h;
-    // Divergence by central differences.
+    // Divergence by central differences, then the splat is dropped: the solve peaks at the
+    // splat plus the divergence (16 bytes a node), the transform itself needs 8.
     let half_inv_h = (0.5 * inv_h) as f32;
-    let mut buf = vec![Complex32::new(0.0, 0.0); len];
-    buf.par_chunks_mut(n * n).enumerate().for_each(|(z, slab)| {
+    let mut div = vec![0f32; len];
+    div.par_chunks_mut(n * n).enumerate().for_each(|(z, slab)| {
         let zp = (z + 1) % n;
         let zm = (z + n - 1) % n;
         for y in 0..n {
@@ -140,11 +142,13 @@ pub fn solve_splatted(grid: &LocalGrid, v: Vec<[f32; 3]>, sigma_vox: f64) -> Vec
                 let d = (v[at(xp, y, z)][0] - v[at(xm, y, z)][0])
                     + (v[at(x, yp, z)][1] - v[at(x, ym, z)][1])
                     + (v[at(x, y, zp)][2] - v[at(x, y, zm)][2]);
-                slab[y * n + x] = Complex32::new(d * half_inv_h, 0.0);
+                slab[y * n + x] = d * half_inv_h;
             }
         }
     });
     drop(v);
+    let mut buf: Vec<Complex32> = div.iter().map(|&d| Complex32::new(d, 0.0)).collect();
+    drop(div);
     let mut planner = FftPlanner::<f32>::new();
     let fwd = planner.plan_fft_forward(n);
     let inv = planner.plan_fft_inverse(n);
@@ -199,32 +203,29 @@ pub fn fft3(data: &mut [Complex32], n: usize, fft: &Arc<dyn Fft<f32>>) {
             transpose_square(slab, n);
         },
     );
-    // z: out-of-place transpose (z, y, x) -> (y, x, z), transform rows, transpose back.
-    let mut t = vec![Complex32::new(0.0, 0.0); data.len()];
-    {
-        let src: &[Complex32] = data;
-        t.par_chunks_mut(n * n).enumerate().for_each(|(y, slab)| {
+    // z: one (x, z) plane at a time, gathered into rows of z, transformed, scattered back;
+    // the scratch is one plane, not a second cube.
+    let mut plane = vec![Complex32::new(0.0, 0.0); n * n];
+    for y in 0..n {
+        for z in 0..n {
+            let row = &data[(z * n + y) * n..(z * n + y) * n + n];
             for x in 0..n {
-                for z in 0..n {
-                    slab[x * n + z] = src[(z * n + y) * n + x];
-                }
+                plane[x * n + z] = row[x];
             }
-        });
+        }
+        plane
+            .par_chunks_mut(n * (n / rayon::current_num_threads().max(1)).max(1))
+            .for_each_init(
+                || vec![Complex32::new(0.0, 0.0); scratch_len],
+                |s, rows| fft.process_with_scratch(rows, s),
+            );
+        for z in 0..n {
+            let row = &mut data[(z * n + y) * n..(z * n + y) * n + n];
+            for x in 0..n {
+                row[x] = plane[x * n + z];
+            }
+        }
     }
-    t.par_chunks_mut(n * n).for_each_init(
-        || vec![Complex32::new(0.0, 0.0); scratch_len],
-        |s, slab| fft.process_with_scratch(slab, s),
-    );
-    let src: &[Complex32] = &t;
-    data.par_chunks_mut(n * n)
-        .enumerate()
-        .for_each(|(z, slab)| {
-            for y in 0..n {
-                for x in 0..n {
-                    slab[y * n + x] = src[(y * n + x) * n + z];
-                }
-            }
-        });
 }
 
 fn transpose_square(m: &mut [Complex32], n: usize) {

@@ -51,6 +51,26 @@ use crate::types::{CellKey, Cube, PointBatch, morton3};
 use fft_solve::LocalGrid;
 use pou::Bump;
 
+/// Peak bytes per node of a solve: the splatted normals (12) and the divergence (4).
+const COARSE_BYTES_PER_NODE: u64 = 16;
+
+/// The smallest `m >= n` whose only prime factors are 2, 3 and 5.
+fn smooth_size(n: u64) -> u64 {
+    let mut m = n.max(1);
+    loop {
+        let mut k = m;
+        for p in [2, 3, 5] {
+            while k.is_multiple_of(p) {
+                k /= p;
+            }
+        }
+        if k == 1 {
+            return m;
+        }
+        m += 1;
+    }
+}
+
 /// Depths `reconstruct` supports.
 pub const DEPTHS: std::ops::RangeInclusive<u32> = 5..=13;
 
@@ -61,13 +81,46 @@ pub struct ReconParams {
     pub depth: u32,
     /// Gaussian smoothing width, in voxels of each grid.
     pub sigma_vox: f64,
-    /// Tile edge in fine voxels (`None`: 128, at least one leaf, at most the cube).
+    /// Tile edge in fine voxels (`None`: 64, at least one leaf, at most the cube).
     pub tile_voxels: Option<u64>,
     /// Work directory (leaf checkpoints, run description).
     pub work_dir: PathBuf,
     /// Reuse the leaves a previous run with the same inputs and options left in `work_dir`.
     pub resume: bool,
+    /// Error tolerance relative to the bounding-box diagonal: a leaf whose samples lie
+    /// within this mean distance of the coarse solution's surface is not refined.
+    pub error: f64,
+    /// Leaves with fewer points in their cell are not refined.
+    pub min_points: u64,
+    /// Leave the surface open where no input point is within two coarse voxels.
+    pub trim: bool,
 }
+
+impl ReconParams {
+    /// Defaults for `depth` with work directory `work_dir`.
+    pub fn new(depth: u32, work_dir: PathBuf) -> ReconParams {
+        ReconParams {
+            depth,
+            sigma_vox: 1.0,
+            tile_voxels: None,
+            work_dir,
+            resume: false,
+            error: DEFAULT_ERROR,
+            min_points: DEFAULT_MIN_POINTS,
+            trim: false,
+        }
+    }
+}
+
+/// Default `--error`: 2·10⁻⁵ of the diagonal, about a fiftieth of a voxel at depth 10: below
+/// the noise of real scans (which are then refined everywhere, as a global solve would be),
+/// above the error of the coarse solve on smooth, clean surfaces (which are then left coarse).
+pub const DEFAULT_ERROR: f64 = 2e-5;
+
+/// Default `--min-points`: a leaf needs this many samples in its cell to be refined. A fixed
+/// count, not a share of the input (the paper's 0.5% suits 10⁵ points, not 10⁹): the detail
+/// of a leaf is defined by its own samples, whatever the size of the scan.
+pub const DEFAULT_MIN_POINTS: u64 = 8;
 
 /// What `reconstruct` did.
 #[derive(Debug, Clone, Serialize)]
@@ -76,8 +129,10 @@ pub struct ReconStats {
     pub vertices: u64,
     /// Output triangles.
     pub faces: u64,
-    /// Leaves solved (or reused).
+    /// Occupied leaves (solved or reused).
     pub leaves: usize,
+    /// Leaves refined by a fine solve (the others were within `--error` of the coarse solve).
+    pub leaves_refined: usize,
     /// Leaves reused from the work directory.
     pub leaves_reused: usize,
     /// Tiles extracted (tiles with no surface are skipped).
@@ -115,8 +170,11 @@ pub struct Plan {
     pub ov: u64,
     /// Octree level of leaves.
     pub leaf_level: u32,
-    /// Coarse padding on each side, in coarse voxels.
+    /// Coarse padding below the cube, in coarse voxels (at least 4 on each side).
     pub pad: u64,
+    /// Coarse nodes per axis: the smallest 5-smooth size (fast for the FFT) holding the cube
+    /// and 4 coarse voxels of padding on each side.
+    pub coarse_nodes: u64,
     /// Tile edge in fine voxels.
     pub tile: u64,
     /// Octree level of tiles.
@@ -146,8 +204,8 @@ impl Plan {
         let mut r = 4u64;
         loop {
             let e = 8 * r;
-            let nc = n / r + 2 * (n / r / 8).max(2);
-            let coarse_bytes = nc * nc * nc * 32;
+            let nc = smooth_size(n / r + 8);
+            let coarse_bytes = nc * nc * nc * COARSE_BYTES_PER_NODE;
             if e >= n || coarse_bytes <= budget_bytes / 3 {
                 break;
             }
@@ -156,8 +214,9 @@ impl Plan {
         let e = (8 * r).min(n);
         let r = (e / 8).max(1);
         let ov = e / 4;
-        let pad = (n / r / 8).max(2);
-        let tile = tile.unwrap_or(128).clamp(e, n);
+        let coarse_nodes = smooth_size(n / r + 8);
+        let pad = (coarse_nodes - n / r) / 2;
+        let tile = tile.unwrap_or(64).clamp(e, n);
         let tile = tile.next_power_of_two().min(n);
         Ok(Plan {
             cube,
@@ -169,6 +228,7 @@ impl Plan {
             ov,
             leaf_level: depth - e.trailing_zeros(),
             pad,
+            coarse_nodes,
             tile,
             tile_level: depth - tile.trailing_zeros(),
             sigma_vox,
@@ -177,7 +237,7 @@ impl Plan {
 
     /// Coarse nodes per axis (periodic FFT size).
     pub fn coarse_n(&self) -> usize {
-        (self.n / self.r + 2 * self.pad) as usize
+        self.coarse_nodes as usize
     }
 
     /// The coarse global grid.
@@ -519,6 +579,48 @@ fn solve_leaf(plan: &Plan, key: CellKey, pts: &LeafPoints, coarse: &CoarseField)
     }
 }
 
+/// The paper's refinement test against the coarse solution: the mean distance of a 10%
+/// sample of the cell's points (every tenth) to the coarse field's level set through them,
+/// to first order `|F(p) − F̄| / |∇F(p)|`, with `F̄` the mean of `F` over the sample.
+fn coarse_error(coarse: &CoarseField, pts: &LeafPoints) -> f64 {
+    let own = &pts.pos[..pts.own];
+    let sample: Vec<[f64; 3]> = own.iter().step_by(10).copied().collect();
+    if sample.is_empty() {
+        return 0.0;
+    }
+    let vals: Vec<f64> = sample.iter().map(|p| coarse.eval(*p)).collect();
+    let level = vals.iter().sum::<f64>() / vals.len() as f64;
+    let d = 0.5 * coarse.grid.h;
+    let mut sum = 0.0;
+    for (p, v) in sample.iter().zip(&vals) {
+        let mut g2 = 0.0;
+        for a in 0..3 {
+            let mut hi = *p;
+            let mut lo = *p;
+            hi[a] += d;
+            lo[a] -= d;
+            let g = (coarse.eval(hi) - coarse.eval(lo)) / (2.0 * d);
+            g2 += g * g;
+        }
+        let g = g2.sqrt();
+        sum += if g > 0.0 {
+            (v - level).abs() / g
+        } else {
+            f64::INFINITY
+        };
+    }
+    sum / sample.len() as f64
+}
+
+/// A leaf left to the coarse solution: no detail, its samples' share of the iso-value.
+fn coarse_only(pts: &LeafPoints, coarse: &CoarseField) -> LeafDetail {
+    LeafDetail {
+        detail: Vec::new(),
+        iso_sum: pts.pos[..pts.own].iter().map(|p| coarse.eval(*p)).sum(),
+        iso_count: pts.own as u64,
+    }
+}
+
 const LEAF_MAGIC: &[u8; 8] = b"SFLEAF01";
 
 fn leaf_path(dir: &Path, key: CellKey) -> PathBuf {
@@ -552,7 +654,8 @@ fn read_leaf(dir: &Path, key: CellKey, m: usize) -> Result<LeafDetail> {
         .with_path(&path)?;
     let raw = zstd::bulk::decompress(&z, 32 + m * m * m * 4 + 16)
         .map_err(|e| Error::input(&path, format!("corrupt leaf checkpoint: {e}")))?;
-    if raw.len() != 32 + m * m * m * 4 || &raw[..8] != LEAF_MAGIC {
+    let full = raw.len() == 32 + m * m * m * 4;
+    if !(full || raw.len() == 32) || &raw[..8] != LEAF_MAGIC {
         return Err(Error::input(
             &path,
             "corrupt leaf checkpoint: wrong size or magic",
@@ -581,6 +684,8 @@ fn read_leaf(dir: &Path, key: CellKey, m: usize) -> Result<LeafDetail> {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 struct RunInfo {
     scanflow: String,
+    error: f64,
+    min_points: u64,
     store_points: u64,
     store_cells_crc: Vec<u32>,
     plan: Plan,
@@ -618,6 +723,8 @@ pub fn reconstruct(
     let leaves_dir = params.work_dir.join("leaves");
     let info = RunInfo {
         scanflow: env!("CARGO_PKG_VERSION").into(),
+        error: params.error,
+        min_points: params.min_points,
         store_points: m.point_count,
         store_cells_crc: m.cells.iter().map(|c| c.crc32).collect(),
         plan,
@@ -656,6 +763,7 @@ pub fn reconstruct(
     let stage = ctx.progress.stage("splat", Some(m.point_count), "points");
     let mut v = vec![[0f32; 3]; cgrid.len()];
     let mut occupied = BTreeSet::new();
+    let mut support = Support::new(&plan);
     let mut moments = [0f64; 10];
     let wave = 2 * ctx.threads();
     let ncells = m.cells.len();
@@ -671,6 +779,7 @@ pub fn reconstruct(
             let b = b?;
             fft_solve::splat(&cgrid, &b.pos, &b.normal, &mut v);
             for p in &b.pos {
+                support.mark(*p);
                 occupied.insert(CellKey::new(
                     plan.leaf_level,
                     plan.cube.cell_coords(*p, plan.leaf_level),
@@ -713,16 +822,18 @@ pub fn reconstruct(
         origin: [0.0; 3],
     }
     .scratch_bytes();
-    let mut src = PointSource::new(store, plan, ctx.budget.total() / 4);
-    let _cache_permit = ctx
-        .budget
-        .acquire(ctx.budget.total() / 4, "the store cell cache")?;
+    // Leaves in Morton order need the store cells around them: a small cache suffices.
+    let point_cap = (ctx.budget.total() / 4).min(128 << 20);
+    let mut src = PointSource::new(store, plan, point_cap);
+    let _cache_permit = ctx.budget.acquire(point_cap, "the store cell cache")?;
     let stage = ctx
         .progress
         .stage("leaves", Some(leaves.len() as u64), "leaves");
     let mut iso_sum = 0.0;
     let mut iso_count = 0u64;
     let mut reused = 0;
+    let mut refined_set = BTreeSet::new();
+    let tol = params.error * m.bounds.diagonal();
     let dm = plan.detail_n();
     for wave_keys in leaves.chunks(wave) {
         let mut todo = Vec::new();
@@ -741,26 +852,35 @@ pub fn reconstruct(
             (fine_bytes * todo.len() as u64).min(ctx.budget.total() / 3) + pts_bytes,
             "a wave of leaf solves",
         )?;
-        let res: Vec<Result<(f64, u64, bool)>> = ctx.pool.install(|| {
+        let res: Vec<Result<(f64, u64, bool, bool)>> = ctx.pool.install(|| {
             todo.par_iter()
                 .map(|(k, pts)| match pts {
                     None => {
                         let d = read_leaf(&leaves_dir, *k, dm)?;
-                        Ok((d.iso_sum, d.iso_count, true))
+                        Ok((d.iso_sum, d.iso_count, true, !d.detail.is_empty()))
                     }
                     Some(p) => {
-                        let d = solve_leaf(&plan, *k, p, &coarse);
+                        let refine =
+                            p.own as u64 >= params.min_points && coarse_error(&coarse, p) > tol;
+                        let d = if refine {
+                            solve_leaf(&plan, *k, p, &coarse)
+                        } else {
+                            coarse_only(p, &coarse)
+                        };
                         write_leaf(&leaves_dir, *k, &d)?;
-                        Ok((d.iso_sum, d.iso_count, false))
+                        Ok((d.iso_sum, d.iso_count, false, !d.detail.is_empty()))
                     }
                 })
                 .collect()
         });
-        for r in res {
-            let (s, c, was_reused) = r?;
+        for (r, k) in res.into_iter().zip(wave_keys) {
+            let (s, c, was_reused, refined) = r?;
             iso_sum += s;
             iso_count += c;
             reused += was_reused as usize;
+            if refined {
+                refined_set.insert(*k);
+            }
         }
         stage.inc(wave_keys.len() as u64);
     }
@@ -773,7 +893,7 @@ pub fn reconstruct(
     };
 
     // Pass 3: tiles in Morton order: blend, extract, weld, write.
-    let leaf_set: BTreeSet<CellKey> = leaves.iter().copied().collect();
+    let leaf_set = refined_set;
     let ntiles_axis = plan.n / plan.tile;
     let tiles_total = ntiles_axis.pow(3);
     let bump = Bump::new(plan.e as i64, plan.ov as i64);
@@ -785,10 +905,12 @@ pub fn reconstruct(
     // Both welder callbacks write to the one writer.
     let writer = std::cell::RefCell::new(MeshPlyWriter::create(out, false)?);
     let mut welder = Welder::new();
-    let mut detail_cache = DetailCache::new(&leaves_dir, dm, ctx.budget.total() / 6);
-    let _detail_permit = ctx
-        .budget
-        .acquire(ctx.budget.total() / 6, "the leaf detail cache")?;
+    // Tiles in Morton order reuse the leaves of their neighbours: the cache keeps twice the
+    // leaves of the last wave (the next wave's tiles are its neighbours), within a sixth of
+    // the budget.
+    let detail_cap = ctx.budget.total() / 6;
+    let mut detail_cache = DetailCache::new(&leaves_dir, dm, detail_cap);
+    let _detail_permit = ctx.budget.acquire(detail_cap, "the leaf detail cache")?;
     let tile_nodes = (plan.tile + 1).pow(3);
     let stage = ctx.progress.stage("tiles", Some(tiles_total), "tiles");
     let mut tiles_done = 0usize;
@@ -814,6 +936,7 @@ pub fn reconstruct(
             }
             t += 1;
         }
+        detail_cache.fit(2 * wave_tiles.iter().map(|w| w.2.len()).sum::<usize>());
         let mut loaded = Vec::with_capacity(wave_tiles.len());
         for (tt, lo, near) in &wave_tiles {
             let mut ds = Vec::with_capacity(near.len());
@@ -833,6 +956,9 @@ pub fn reconstruct(
                     let dims = [(plan.tile + 1) as usize; 3];
                     let mut mesh = TileMesh::default();
                     marching_cubes(&f, dims, lo.map(|v| v as u64), iso as f32, &geom, &mut mesh);
+                    if params.trim {
+                        trim_mesh(&mut mesh, |c| support.near(c));
+                    }
                     (*tt, mesh)
                 })
                 .collect()
@@ -856,6 +982,7 @@ pub fn reconstruct(
         vertices: ws.vertices,
         faces: ws.faces,
         leaves: leaves.len(),
+        leaves_refined: leaf_set.len(),
         leaves_reused: reused,
         tiles: tiles_done,
         iso,
@@ -865,6 +992,85 @@ pub fn reconstruct(
         peak_frontier: welder.peak_frontier(),
         secs: t0.elapsed().as_secs_f64(),
     })
+}
+
+/// Which coarse voxels hold input points (for `--trim`).
+struct Support {
+    origin: [f64; 3],
+    inv_h: f64,
+    n: i64,
+    bits: Vec<u64>,
+}
+
+impl Support {
+    fn new(plan: &Plan) -> Support {
+        let n = (plan.n / plan.r) as i64;
+        Support {
+            origin: plan.cube.origin,
+            inv_h: 1.0 / (plan.h * plan.r as f64),
+            n,
+            bits: vec![0u64; ((n * n * n) as usize).div_ceil(64)],
+        }
+    }
+
+    fn cell(&self, p: [f64; 3]) -> [i64; 3] {
+        [0, 1, 2]
+            .map(|a| (((p[a] - self.origin[a]) * self.inv_h).floor() as i64).clamp(0, self.n - 1))
+    }
+
+    fn mark(&mut self, p: [f64; 3]) {
+        let c = self.cell(p);
+        let i = ((c[2] * self.n + c[1]) * self.n + c[0]) as usize;
+        self.bits[i / 64] |= 1 << (i % 64);
+    }
+
+    /// True when a point lies in the coarse voxel of `p` or one of its 26 neighbours.
+    fn near(&self, p: [f64; 3]) -> bool {
+        let c = self.cell(p);
+        for dz in -1..=1 {
+            for dy in -1..=1 {
+                for dx in -1..=1 {
+                    let q = [c[0] + dx, c[1] + dy, c[2] + dz];
+                    if q.iter().any(|&v| v < 0 || v >= self.n) {
+                        continue;
+                    }
+                    let i = ((q[2] * self.n + q[1]) * self.n + q[0]) as usize;
+                    if self.bits[i / 64] & (1 << (i % 64)) != 0 {
+                        return true;
+                    }
+                }
+            }
+        }
+        false
+    }
+}
+
+/// Keep the triangles whose centroid `keep` accepts, and only the vertices they use.
+fn trim_mesh(mesh: &mut TileMesh, keep: impl Fn([f64; 3]) -> bool) {
+    let mut used = vec![u32::MAX; mesh.positions.len()];
+    let mut tris = Vec::with_capacity(mesh.triangles.len());
+    let mut keys = Vec::new();
+    let mut positions = Vec::new();
+    for t in &mesh.triangles {
+        let p = t.map(|i| mesh.positions[i as usize]);
+        let c = [0, 1, 2].map(|a| (p[0][a] + p[1][a] + p[2][a]) / 3.0);
+        if !keep(c) {
+            continue;
+        }
+        let nt = t.map(|i| {
+            let i = i as usize;
+            if used[i] == u32::MAX {
+                used[i] = keys.len() as u32;
+                keys.push(mesh.keys[i]);
+                positions.push(mesh.positions[i]);
+            }
+            used[i]
+        });
+        tris.push(nt);
+    }
+    mesh.triangles = tris;
+    mesh.keys = keys;
+    mesh.positions = positions;
 }
 
 /// Refuse point sets that span no volume: a plane or a line has no inside.
@@ -991,6 +1197,7 @@ struct DetailCache {
     map: HashMap<CellKey, Arc<Vec<f32>>>,
     lru: VecDeque<CellKey>,
     cap_entries: usize,
+    max_entries: usize,
 }
 
 impl DetailCache {
@@ -1002,6 +1209,21 @@ impl DetailCache {
             map: HashMap::new(),
             lru: VecDeque::new(),
             cap_entries: ((cap_bytes / per.max(1)) as usize).max(64),
+            max_entries: ((cap_bytes / per.max(1)) as usize).max(64),
+        }
+    }
+
+    /// Keep at most `want` entries (at least 64, at most the byte cap allows).
+    fn fit(&mut self, want: usize) {
+        self.cap_entries = want.clamp(64, self.max_entries);
+        self.evict();
+    }
+
+    fn evict(&mut self) {
+        while self.lru.len() > self.cap_entries {
+            if let Some(old) = self.lru.pop_front() {
+                self.map.remove(&old);
+            }
         }
     }
 
@@ -1012,11 +1234,47 @@ impl DetailCache {
         let d = Arc::new(read_leaf(&self.dir, k, self.m)?.detail);
         self.map.insert(k, Arc::clone(&d));
         self.lru.push_back(k);
-        while self.lru.len() > self.cap_entries {
-            if let Some(old) = self.lru.pop_front() {
-                self.map.remove(&old);
-            }
-        }
+        self.evict();
         Ok(d)
     }
+}
+
+/// One global FFT solve over the whole cube at `depth`, extracted as a single tile: the
+/// reference the two-level adaptive solve is measured against at depths where `(2^depth)³`
+/// nodes fit in memory (`notes/adfft.md`). The periodic grid is padded by an eighth of the cube
+/// on each side, as the coarse solve is.
+pub fn global_solve(
+    pos: &[[f64; 3]],
+    nrm: &[[f32; 3]],
+    cube: &Cube,
+    depth: u32,
+    sigma_vox: f64,
+) -> TileMesh {
+    let n = 1usize << depth;
+    let pad = (n / 8).max(2);
+    let h = cube.size / n as f64;
+    let grid = LocalGrid {
+        n: n + 2 * pad,
+        h,
+        origin: cube.origin.map(|o| o - pad as f64 * h),
+    };
+    let f = fft_solve::solve(&grid, pos, nrm, sigma_vox);
+    let iso = pos.iter().map(|p| grid.eval(&f, *p)).sum::<f64>() / pos.len().max(1) as f64;
+    let m = n + 1;
+    let mut block = Vec::with_capacity(m * m * m);
+    for z in 0..m {
+        for y in 0..m {
+            for x in 0..m {
+                block.push(f[((z + pad) * grid.n + y + pad) * grid.n + x + pad]);
+            }
+        }
+    }
+    let geom = GridGeom {
+        origin: cube.origin,
+        h,
+        n: n as u64,
+    };
+    let mut mesh = TileMesh::default();
+    marching_cubes(&block, [m; 3], [0; 3], iso as f32, &geom, &mut mesh);
+    mesh
 }
