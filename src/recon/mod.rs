@@ -680,10 +680,81 @@ fn read_leaf(dir: &Path, key: CellKey, m: usize) -> Result<LeafDetail> {
     })
 }
 
+const TILE_MAGIC: &[u8; 8] = b"SFTILE01";
+
+fn tile_path(dir: &Path, t: u64) -> PathBuf {
+    dir.join(format!("{t:016x}.zst"))
+}
+
+/// Checkpoint a tile's mesh (after trimming): edge keys, f64 positions, triangles.
+fn write_tile(path: &Path, m: &TileMesh) -> Result<()> {
+    let mut raw = Vec::with_capacity(24 + m.keys.len() * 32 + m.triangles.len() * 12);
+    raw.extend_from_slice(TILE_MAGIC);
+    raw.extend_from_slice(&(m.keys.len() as u64).to_le_bytes());
+    raw.extend_from_slice(&(m.triangles.len() as u64).to_le_bytes());
+    for k in &m.keys {
+        raw.extend_from_slice(&k.0.to_le_bytes());
+    }
+    for p in &m.positions {
+        for v in p {
+            raw.extend_from_slice(&v.to_le_bytes());
+        }
+    }
+    for t in &m.triangles {
+        for v in t {
+            raw.extend_from_slice(&v.to_le_bytes());
+        }
+    }
+    let z = zstd::bulk::compress(&raw, 1)
+        .map_err(|e| Error::Internal(format!("zstd compression failed: {e}")))?;
+    let tmp = path.with_extension("tmp");
+    std::fs::write(&tmp, z).with_path(&tmp)?;
+    std::fs::rename(&tmp, path).with_path(path)
+}
+
+fn read_tile(path: &Path) -> Result<TileMesh> {
+    let z = std::fs::read(path).with_path(path)?;
+    let bad = |what: &str| Error::input(path, format!("corrupt tile checkpoint: {what}"));
+    let raw = zstd::stream::decode_all(&z[..]).map_err(|e| bad(&e.to_string()))?;
+    if raw.len() < 24 || &raw[..8] != TILE_MAGIC {
+        return Err(bad("wrong magic"));
+    }
+    let u64_at = |o: usize| {
+        let mut a = [0u8; 8];
+        a.copy_from_slice(&raw[o..o + 8]);
+        u64::from_le_bytes(a)
+    };
+    let (nv, nt) = (u64_at(8) as usize, u64_at(16) as usize);
+    if raw.len() != 24 + nv * 32 + nt * 12 {
+        return Err(bad("wrong size"));
+    }
+    let mut m = TileMesh::default();
+    let mut o = 24;
+    for _ in 0..nv {
+        m.keys.push(crate::extract::cpu::EdgeKey(u64_at(o)));
+        o += 8;
+    }
+    for _ in 0..nv {
+        m.positions
+            .push([0, 1, 2].map(|k| f64::from_bits(u64_at(o + 8 * k))));
+        o += 24;
+    }
+    for _ in 0..nt {
+        let mut t = [0u32; 3];
+        for v in &mut t {
+            *v = u32::from_le_bytes([raw[o], raw[o + 1], raw[o + 2], raw[o + 3]]);
+            o += 4;
+        }
+        m.triangles.push(t);
+    }
+    Ok(m)
+}
+
 /// What a work directory was made for; a resumed run must match it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 struct RunInfo {
     scanflow: String,
+    trim: bool,
     error: f64,
     min_points: u64,
     store_points: u64,
@@ -723,6 +794,7 @@ pub fn reconstruct(
     let leaves_dir = params.work_dir.join("leaves");
     let info = RunInfo {
         scanflow: env!("CARGO_PKG_VERSION").into(),
+        trim: params.trim,
         error: params.error,
         min_points: params.min_points,
         store_points: m.point_count,
@@ -753,6 +825,8 @@ pub fn reconstruct(
         std::fs::write(&info_path, text).with_path(&info_path)?;
     }
     std::fs::create_dir_all(&leaves_dir).with_path(&leaves_dir)?;
+    let tiles_dir = params.work_dir.join("tiles");
+    std::fs::create_dir_all(&tiles_dir).with_path(&tiles_dir)?;
 
     // Pass 1: splat every point into the coarse grid; collect occupied leaf cells; the
     // covariance of the points to refuse planar and linear inputs.
@@ -939,19 +1013,27 @@ pub fn reconstruct(
         detail_cache.fit(2 * wave_tiles.iter().map(|w| w.2.len()).sum::<usize>());
         let mut loaded = Vec::with_capacity(wave_tiles.len());
         for (tt, lo, near) in &wave_tiles {
+            if params.resume && tile_path(&tiles_dir, *tt).exists() {
+                loaded.push((*tt, *lo, None));
+                continue;
+            }
             let mut ds = Vec::with_capacity(near.len());
             for k in near {
                 ds.push((*k, detail_cache.get(*k)?));
             }
-            loaded.push((*tt, *lo, ds));
+            loaded.push((*tt, *lo, Some(ds)));
         }
         let _permit = ctx
             .budget
             .acquire(loaded.len() as u64 * tile_nodes * 12, "a wave of tiles")?;
-        let meshes: Vec<(u64, TileMesh)> = ctx.pool.install(|| {
+        let meshes: Vec<Result<(u64, TileMesh)>> = ctx.pool.install(|| {
             loaded
                 .par_iter()
                 .map(|(tt, lo, ds)| {
+                    let path = tile_path(&tiles_dir, *tt);
+                    let Some(ds) = ds else {
+                        return Ok((*tt, read_tile(&path)?));
+                    };
                     let f = tile_field(&plan, &bump, &coarse, *lo, ds);
                     let dims = [(plan.tile + 1) as usize; 3];
                     let mut mesh = TileMesh::default();
@@ -959,11 +1041,13 @@ pub fn reconstruct(
                     if params.trim {
                         trim_mesh(&mut mesh, |c| support.near(c));
                     }
-                    (*tt, mesh)
+                    write_tile(&path, &mesh)?;
+                    Ok((*tt, mesh))
                 })
                 .collect()
         });
-        for (tt, mesh) in meshes {
+        for m in meshes {
+            let (tt, mesh) = m?;
             welder.add_tile(
                 tt,
                 &mesh,

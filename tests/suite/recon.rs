@@ -252,52 +252,61 @@ fn killed_run_resumes_to_the_same_bytes() {
     let ply = synth(d.path(), "bumpy", 200_000, 0.0005);
     let whole = d.path().join("whole.ply");
     recon(&ply, &whole, &["--depth", "8"]);
-    let out = d.path().join("resumed.ply");
-    let work = d.path().join("work");
-    let mut child = bin()
-        .args([
-            "reconstruct",
-            s(&ply),
-            "-o",
-            s(&out),
-            "--depth",
-            "8",
-            "--work-dir",
-            s(&work),
-            "--progress",
-            "none",
-        ])
-        .spawn()
-        .unwrap();
-    // Kill it (SIGKILL) as soon as some leaves are checkpointed.
-    let leaves = work.join("leaves");
-    let t0 = std::time::Instant::now();
-    let mut killed = false;
-    while t0.elapsed() < std::time::Duration::from_secs(120) {
-        let n = std::fs::read_dir(&leaves).map(|r| r.count()).unwrap_or(0);
-        if n >= 20 {
-            child.kill().unwrap();
-            killed = true;
-            break;
+    // Kill (SIGKILL) once some leaves, then once some tiles, are checkpointed.
+    for (phase, at) in [("leaves", 20), ("tiles", 4)] {
+        let out = d.path().join(format!("resumed_{phase}.ply"));
+        let work = d.path().join(format!("work_{phase}"));
+        let mut child = bin()
+            .args([
+                "reconstruct",
+                s(&ply),
+                "-o",
+                s(&out),
+                "--depth",
+                "8",
+                "--work-dir",
+                s(&work),
+                "--progress",
+                "none",
+            ])
+            .spawn()
+            .unwrap();
+        let dir = work.join(phase);
+        let t0 = std::time::Instant::now();
+        let mut killed = false;
+        while t0.elapsed() < std::time::Duration::from_secs(120) {
+            let n = std::fs::read_dir(&dir).map(|r| r.count()).unwrap_or(0);
+            if n >= at {
+                child.kill().unwrap();
+                killed = true;
+                break;
+            }
+            if child.try_wait().unwrap().is_some() {
+                break;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(2));
         }
-        if child.try_wait().unwrap().is_some() {
-            break;
-        }
-        std::thread::sleep(std::time::Duration::from_millis(5));
+        let _ = child.wait();
+        assert!(
+            killed,
+            "the run ended before it could be killed in the {phase} phase"
+        );
+        assert!(
+            !out.exists(),
+            "a killed run left a file under the final name"
+        );
+        let o = recon(
+            &ply,
+            &out,
+            &["--depth", "8", "--work-dir", s(&work), "--resume"],
+        );
+        assert!(o.contains("reconstructed"), "{o}");
+        assert_eq!(
+            std::fs::read(&whole).unwrap(),
+            std::fs::read(&out).unwrap(),
+            "{phase}"
+        );
     }
-    let _ = child.wait();
-    assert!(killed, "the run ended before it could be killed");
-    assert!(
-        !out.exists(),
-        "a killed run left a file under the final name"
-    );
-    let o = recon(
-        &ply,
-        &out,
-        &["--depth", "8", "--work-dir", s(&work), "--resume"],
-    );
-    assert!(o.contains("reconstructed"), "{o}");
-    assert_eq!(std::fs::read(&whole).unwrap(), std::fs::read(&out).unwrap());
 }
 
 fn to_mesh(t: &scanflow::extract::cpu::TileMesh) -> scanflow::io::mesh_read::Mesh {
