@@ -298,20 +298,9 @@ impl PointReader for LasReader {
 
     fn chunks(&self, target_points: u64) -> Result<Vec<ChunkSpec>> {
         let target = aligned_target(target_points, self.laz_chunk);
-        let mut out = Vec::with_capacity(usize::try_from(self.len / target + 1).unwrap_or(0));
-        let mut i = 0;
-        while i < self.len {
-            let n = target.min(self.len - i);
-            out.push(ChunkSpec {
-                byte_start: self.byte_of(i),
-                byte_end: self.byte_of(i + n),
-                first_index: i,
-                count: n,
-                first_line: 0,
-            });
-            i += n;
-        }
-        Ok(out)
+        Ok(crate::io::record_chunks(self.len, target, |i| {
+            self.byte_of(i)
+        }))
     }
 
     fn read_chunk(

@@ -132,25 +132,6 @@ fn header(vertices: u64, faces: u64, with_color: bool) -> String {
     h
 }
 
-/// Sync the directory holding `path`, so that a rename into it is durable. Best effort: some
-/// platforms and file systems cannot open or sync a directory, which is no reason to fail.
-fn sync_parent_dir(path: &Path) {
-    #[cfg(unix)]
-    {
-        let parent = match path.parent() {
-            Some(p) if !p.as_os_str().is_empty() => p,
-            _ => Path::new("."),
-        };
-        if let Ok(d) = File::open(parent) {
-            let _ = d.sync_all();
-        }
-    }
-    #[cfg(not(unix))]
-    {
-        let _ = path;
-    }
-}
-
 impl MeshPlyWriter {
     /// Start writing a mesh to `path`, with an RGB colour per vertex when `with_color`.
     ///
@@ -351,7 +332,7 @@ impl MeshPlyWriter {
         std::fs::rename(&self.tmp_path, &self.final_path).with_path(&self.final_path)?;
         // Renamed: nothing left for Drop to remove but the faces.
         self.tmp_path = PathBuf::new();
-        sync_parent_dir(&self.final_path);
+        crate::io::ply_write::sync_parent_dir(&self.final_path);
         let _ = std::fs::remove_file(&self.faces_path);
         self.faces_path = PathBuf::new();
         Ok(MeshWriteStats {

@@ -180,6 +180,26 @@ pub fn open(path: &Path) -> Result<Box<dyn PointReader>> {
     }
 }
 
+/// Chunks of at most `target` records out of `total` fixed-size records, record `i` starting
+/// at byte `byte_of(i)` (binary formats).
+pub fn record_chunks(total: u64, target: u64, byte_of: impl Fn(u64) -> u64) -> Vec<ChunkSpec> {
+    let target = target.max(1);
+    let mut out = Vec::with_capacity(usize::try_from(total / target + 1).unwrap_or(0));
+    let mut i = 0;
+    while i < total {
+        let n = target.min(total - i);
+        out.push(ChunkSpec {
+            byte_start: byte_of(i),
+            byte_end: byte_of(i + n),
+            first_index: i,
+            count: n,
+            first_line: 0,
+        });
+        i += n;
+    }
+    out
+}
+
 /// Which coordinate of `p` is not finite, if any.
 #[inline]
 pub fn non_finite_axis(p: [f64; 3]) -> Option<&'static str> {

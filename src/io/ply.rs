@@ -937,19 +937,9 @@ impl PointReader for PlyReader {
             return Ok(out);
         }
         let stride = self.stride as u64;
-        let mut i = 0;
-        while i < total {
-            let n = target.min(total - i);
-            out.push(ChunkSpec {
-                byte_start: self.vertex_start + i * stride,
-                byte_end: self.vertex_start + (i + n) * stride,
-                first_index: i,
-                count: n,
-                first_line: 0,
-            });
-            i += n;
-        }
-        Ok(out)
+        Ok(crate::io::record_chunks(total, target, |i| {
+            self.vertex_start + i * stride
+        }))
     }
 
     fn read_chunk(

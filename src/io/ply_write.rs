@@ -108,7 +108,7 @@ fn record_bytes(attrs: Attributes) -> usize {
 
 /// Sync the directory holding `path`, so that a rename into it is durable. Best effort: some
 /// platforms and file systems cannot open or sync a directory, which is no reason to fail.
-fn sync_parent_dir(path: &Path) {
+pub(crate) fn sync_parent_dir(path: &Path) {
     #[cfg(unix)]
     {
         let parent = match path.parent() {
