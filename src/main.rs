@@ -111,6 +111,10 @@ enum Cmd {
         /// Leave the surface open where no input point supports it.
         #[arg(long)]
         trim: bool,
+        /// Marching cubes on the GPU: auto (a discrete or integrated GPU when present), on
+        /// (any Vulkan/Metal/DX12 adapter, software ones included), off.
+        #[arg(long, default_value = "auto")]
+        gpu: String,
         #[command(flatten)]
         common: Common,
     },
@@ -269,6 +273,7 @@ fn run(cli: Cli) -> Result<()> {
             error,
             min_points,
             trim,
+            gpu,
             common,
         } => {
             let ctx = ctx(&common)?;
@@ -288,6 +293,7 @@ fn run(cli: Cli) -> Result<()> {
             params.error = error;
             params.min_points = min_points;
             params.trim = trim;
+            params.gpu = gpu.parse()?;
             let st = reconstruct(&ctx, &inputs, conf.as_deref(), &output, params, keep_work)?;
             println!(
                 "reconstructed {} vertices, {} triangles into {} in {:.2} s ({} leaves, {} refined, iso {:.4}), peak memory {}",

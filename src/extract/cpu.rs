@@ -291,20 +291,20 @@ impl McWorkspace {
                             touched[group[e]].push(s as u32);
                             let axis = EDGE_AXIS[e] as usize;
                             let a = k * l + base + node_off[e];
-                            let (va, vb) = (values[a] as f64, values[a + stride[axis]] as f64);
-                            let t = (iso64 - va) / (vb - va);
-                            let t = if t.is_nan() { 0.5 } else { t.clamp(0.0, 1.0) };
                             let o = CORNER_OFFSETS[EDGE_CORNERS[e][0] as usize];
                             let g = [
                                 origin_node[0] + (x + o[0] as usize) as u64,
                                 origin_node[1] + (y + o[1] as usize) as u64,
                                 origin_node[2] + (k + o[2] as usize) as u64,
                             ];
-                            let mut p = [0.0; 3];
-                            for d in 0..3 {
-                                let c = g[d] as f64 + if d == axis { t } else { 0.0 };
-                                p[d] = geom.origin[d] + geom.h * c;
-                            }
+                            let p = edge_vertex(
+                                geom,
+                                g,
+                                axis,
+                                values[a],
+                                values[a + stride[axis]],
+                                iso64,
+                            );
                             out.keys.push(geom.edge_key(g, axis as u8));
                             out.positions.push(p);
                         }
@@ -322,6 +322,30 @@ impl McWorkspace {
         }
         Ok(stats)
     }
+}
+
+/// World position of the vertex on the grid edge from global node `node` along `axis`, whose
+/// lower and upper nodes hold `va` and `vb`: `t = (iso − v_a)/(v_b − v_a)` in `f64`, clamped
+/// to `[0, 1]` (0.5 where it is NaN). The one formula of every kernel (CPU and GPU), so a seam
+/// vertex is bit for bit the same whichever tile or kernel computes it.
+#[inline]
+pub(crate) fn edge_vertex(
+    geom: &GridGeom,
+    node: [u64; 3],
+    axis: usize,
+    va: f32,
+    vb: f32,
+    iso: f64,
+) -> [f64; 3] {
+    let (va, vb) = (va as f64, vb as f64);
+    let t = (iso - va) / (vb - va);
+    let t = if t.is_nan() { 0.5 } else { t.clamp(0.0, 1.0) };
+    let mut p = [0.0; 3];
+    for d in 0..3 {
+        let c = node[d] as f64 + if d == axis { t } else { 0.0 };
+        p[d] = geom.origin[d] + geom.h * c;
+    }
+    p
 }
 
 /// `out[i] = (values[i] < iso)`; NaN is outside.

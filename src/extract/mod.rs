@@ -47,9 +47,11 @@
 //!   order, so output bytes do not depend on thread timing.
 
 pub mod cpu;
+pub mod gpu;
 pub mod tables;
 pub mod weld;
 
 pub use cpu::{EdgeKey, GridGeom, McStats, McWorkspace, TileMesh, marching_cubes};
+pub use gpu::{GpuExtractor, GpuMode, GpuStats};
 pub use tables::{CORNER_OFFSETS, EDGE_CORNERS, case_triangles, flat_table};
 pub use weld::Welder;

@@ -94,6 +94,8 @@ pub struct ReconParams {
     pub min_points: u64,
     /// Leave the surface open where no input point is within two coarse voxels.
     pub trim: bool,
+    /// Marching cubes on the GPU: auto (a real GPU when there is one), on, off.
+    pub gpu: crate::extract::gpu::GpuMode,
 }
 
 impl ReconParams {
@@ -108,6 +110,7 @@ impl ReconParams {
             error: DEFAULT_ERROR,
             min_points: DEFAULT_MIN_POINTS,
             trim: false,
+            gpu: crate::extract::gpu::GpuMode::Auto,
         }
     }
 }
@@ -977,6 +980,10 @@ pub fn reconstruct(
         n: plan.n,
     };
     // Both welder callbacks write to the one writer.
+    let mut gpu = crate::extract::gpu::GpuExtractor::new(params.gpu)?;
+    if let Some(g) = &gpu {
+        log::info!("extracting tiles on the GPU: {}", g.adapter_name());
+    }
     let writer = std::cell::RefCell::new(MeshPlyWriter::create(out, false)?);
     let mut welder = Welder::new();
     // Tiles in Morton order reuse the leaves of their neighbours: the cache keeps twice the
@@ -1026,26 +1033,61 @@ pub fn reconstruct(
         let _permit = ctx
             .budget
             .acquire(loaded.len() as u64 * tile_nodes * 12, "a wave of tiles")?;
-        let meshes: Vec<Result<(u64, TileMesh)>> = ctx.pool.install(|| {
-            loaded
-                .par_iter()
-                .map(|(tt, lo, ds)| {
-                    let path = tile_path(&tiles_dir, *tt);
-                    let Some(ds) = ds else {
-                        return Ok((*tt, read_tile(&path)?));
-                    };
-                    let f = tile_field(&plan, &bump, &coarse, *lo, ds);
-                    let dims = [(plan.tile + 1) as usize; 3];
-                    let mut mesh = TileMesh::default();
-                    marching_cubes(&f, dims, lo.map(|v| v as u64), iso as f32, &geom, &mut mesh);
-                    if params.trim {
-                        trim_mesh(&mut mesh, |c| support.near(c));
-                    }
-                    write_tile(&path, &mesh)?;
-                    Ok((*tt, mesh))
-                })
-                .collect()
-        });
+        let dims = [(plan.tile + 1) as usize; 3];
+        let finish = |tt: u64, mut mesh: TileMesh| -> Result<(u64, TileMesh)> {
+            if params.trim {
+                trim_mesh(&mut mesh, |c| support.near(c));
+            }
+            write_tile(&tile_path(&tiles_dir, tt), &mesh)?;
+            Ok((tt, mesh))
+        };
+        let meshes: Vec<Result<(u64, TileMesh)>> = match gpu.as_mut() {
+            // GPU: fields built in parallel on the CPU, extracted tile by tile on the device.
+            Some(g) => {
+                let fields: Vec<Option<Vec<f32>>> = ctx.pool.install(|| {
+                    loaded
+                        .par_iter()
+                        .map(|(_, lo, ds)| {
+                            ds.as_ref()
+                                .map(|ds| tile_field(&plan, &bump, &coarse, *lo, ds))
+                        })
+                        .collect()
+                });
+                let mut out = Vec::with_capacity(loaded.len());
+                for ((tt, lo, _), f) in loaded.iter().zip(fields) {
+                    out.push(match f {
+                        None => read_tile(&tile_path(&tiles_dir, *tt)).map(|m| (*tt, m)),
+                        Some(f) => {
+                            let mut mesh = TileMesh::default();
+                            g.extract(&f, dims, lo.map(|v| v as u64), iso as f32, &geom, &mut mesh)
+                                .and_then(|_| finish(*tt, mesh))
+                        }
+                    });
+                }
+                out
+            }
+            None => ctx.pool.install(|| {
+                loaded
+                    .par_iter()
+                    .map(|(tt, lo, ds)| {
+                        let Some(ds) = ds else {
+                            return Ok((*tt, read_tile(&tile_path(&tiles_dir, *tt))?));
+                        };
+                        let f = tile_field(&plan, &bump, &coarse, *lo, ds);
+                        let mut mesh = TileMesh::default();
+                        marching_cubes(
+                            &f,
+                            dims,
+                            lo.map(|v| v as u64),
+                            iso as f32,
+                            &geom,
+                            &mut mesh,
+                        );
+                        finish(*tt, mesh)
+                    })
+                    .collect()
+            }),
+        };
         for m in meshes {
             let (tt, mesh) = m?;
             welder.add_tile(

@@ -396,3 +396,36 @@ fn two_level_matches_one_global_solve() {
         cg.triangles
     );
 }
+
+#[test]
+fn gpu_and_cpu_write_identical_files() {
+    if scanflow::extract::gpu::adapter_names().is_empty() {
+        eprintln!(
+            "skipped: wgpu finds no adapter (no Vulkan driver; install mesa-vulkan-drivers for lavapipe)"
+        );
+        return;
+    }
+    let d = tempfile::tempdir().unwrap();
+    for (shape, depth, extra) in [
+        ("sphere", "7", None),
+        ("torus", "7", Some("--trim")),
+        ("bumpy", "8", None),
+    ] {
+        let ply = synth(d.path(), shape, 50_000, 0.0005);
+        let cpu = d.path().join(format!("{shape}_cpu.ply"));
+        let gpu = d.path().join(format!("{shape}_gpu.ply"));
+        let mut a = vec!["--depth", depth, "--gpu", "off"];
+        let mut b = vec!["--depth", depth, "--gpu", "on"];
+        if let Some(x) = extra {
+            a.push(x);
+            b.push(x);
+        }
+        recon(&ply, &cpu, &a);
+        recon(&ply, &gpu, &b);
+        assert_eq!(
+            std::fs::read(&cpu).unwrap(),
+            std::fs::read(&gpu).unwrap(),
+            "{shape}"
+        );
+    }
+}
