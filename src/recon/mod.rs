@@ -94,7 +94,8 @@ pub struct ReconParams {
     pub min_points: u64,
     /// Leave the surface open where no input point is within two coarse voxels.
     pub trim: bool,
-    /// Marching cubes on the GPU: auto (a real GPU when there is one), on, off.
+    /// Marching cubes on the GPU: auto (a real GPU when there is one), on, off (the default:
+    /// the GPU path is not yet faster end to end, see `extract::gpu`).
     pub gpu: crate::extract::gpu::GpuMode,
 }
 
@@ -110,7 +111,7 @@ impl ReconParams {
             error: DEFAULT_ERROR,
             min_points: DEFAULT_MIN_POINTS,
             trim: false,
-            gpu: crate::extract::gpu::GpuMode::Auto,
+            gpu: crate::extract::gpu::GpuMode::Off,
         }
     }
 }
