@@ -724,10 +724,9 @@ impl Distances {
             };
         }
         let n = d.len() as f64;
-        let (s, s2) = d
-            .par_iter()
-            .map(|&x| (x, x * x))
-            .reduce(|| (0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
+        // Sequential sums: a parallel reduction would add in an order that depends on work
+        // stealing, and the figures must not change from run to run.
+        let (s, s2) = d.iter().fold((0.0, 0.0), |a, &x| (a.0 + x, a.1 + x * x));
         let max = d.iter().copied().fold(f64::NEG_INFINITY, f64::max);
         let p95 = quantile(d, 0.95);
         Distances {

@@ -56,6 +56,7 @@
 use std::collections::{HashMap, VecDeque};
 use std::fmt;
 use std::str::FromStr;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, mpsc};
 use std::time::Instant;
 
@@ -113,7 +114,7 @@ pub struct GpuStats {
     pub kernel_secs: f64,
     /// Wall time reading back vertex records and triangles, in seconds.
     pub download_secs: f64,
-    /// Wall time on the host turning them into the [`TileMesh`] (renumbering, positions), in
+    /// Wall time on the host turning them into the [`TileMesh`] (seams, keys, positions), in
     /// seconds; 0 when the tile fell back to the CPU.
     pub host_secs: f64,
     /// Cells of the block (with all 8 corners in it).
@@ -172,13 +173,19 @@ fn rank(mode: GpuMode, t: wgpu::DeviceType) -> Option<u8> {
 const MAX_BLOCK_NODES: u64 = 1 << 28;
 /// Largest buffer used: `u32` indices address it in 4-byte words, and `3·triangles` fits.
 const MAX_BUFFER_BYTES: u64 = (1 << 32) - 16;
+/// Bytes one thread copies at a time to or from mapped memory.
+const COPY_CHUNK: usize = 8 << 20;
 /// Items one workgroup of `scan.wgsl` scans.
 const SCAN_BLOCK: u64 = 1024;
 /// Threads per workgroup of every shader.
 const WG: u64 = 256;
 /// Bit 31 of a vertex record: the edge lies on a face shared with another sub-block.
 const SEAM: u32 = 1 << 31;
-/// Where the per-case words start in the tables buffer (`common.wgsl`).
+/// A record replaced by this matched a vertex of an earlier sub-block (no valid record is
+/// this large).
+const MATCHED: u32 = u32::MAX;
+/// Layout of the tables buffer (`common.wgsl`): triangle-edge starts at 0, crossing-edge
+/// starts at `USED_START`, case info at `CASE_INFO`, the edge lists from `TABLE_HEAD` on.
 const USED_START: usize = 257;
 const CASE_INFO: usize = 514;
 const TABLE_HEAD: usize = 770;
@@ -291,19 +298,22 @@ fn table_words() -> Vec<u32> {
     let used_base = tri_base + tri_edges.len();
     let mut w = Vec::with_capacity(used_base + used.len());
     w.extend(tri_start.iter().map(|&s| (tri_base + s as usize) as u32));
+    debug_assert_eq!(w.len(), USED_START);
     w.extend(used_start.iter().map(|&s| (used_base + s) as u32));
+    debug_assert_eq!(w.len(), CASE_INFO);
     for case in 0..=255u8 {
         let c = case as usize;
         let tris = (tri_start[c + 1] - tri_start[c]) / 3;
         w.push(tris | (tables::crossing_edges(case) as u32) << 4);
     }
     debug_assert_eq!(w.len(), TABLE_HEAD);
-    debug_assert_eq!((USED_START, CASE_INFO), (257, 514));
     w.extend(tri_edges.iter().map(|&e| e as u32));
     w.extend(used);
     w
 }
 
+/// `(groups_x, groups_y)` of a 2D dispatch grid with at least `groups` workgroups, each
+/// dimension at most `max_dim`.
 fn grid(groups: u64, max_dim: u32) -> (u32, u32) {
     let gx = groups.clamp(1, max_dim as u64);
     (gx as u32, groups.div_ceil(gx).max(1) as u32)
@@ -336,6 +346,7 @@ struct Pipelines {
 /// Grow-only device buffers, reused from tile to tile.
 #[derive(Default)]
 struct Buffers {
+    upload: Option<wgpu::Buffer>,
     values: Option<wgpu::Buffer>,
     counts: Option<wgpu::Buffer>,
     sums: [Option<wgpu::Buffer>; 3],
@@ -378,6 +389,20 @@ fn ensure(
     }
 }
 
+/// Copy `src` into the mapped memory `dst` (of the same length) on all cores: one thread is
+/// far from filling the bus for a big tile.
+fn copy_parallel(dst: wgpu::WriteOnly<'_, [u8]>, src: &[u8]) {
+    let (chunks, mut rest) = dst.into_chunks::<COPY_CHUNK>();
+    let (head, tail) = src.split_at(chunks.len() * COPY_CHUNK);
+    // `WriteOnly<[u8; N]>` is `Send` where `WriteOnly<[u8]>` is not.
+    let chunks: Vec<_> = chunks.into_iter().collect();
+    chunks
+        .into_par_iter()
+        .zip(head.par_chunks(COPY_CHUNK))
+        .for_each(|(d, s)| wgpu::WriteOnly::<[u8]>::from(d).copy_from_slice(s));
+    rest.copy_from_slice(tail);
+}
+
 /// Errors that wgpu reports outside an error scope, and the reason a device was lost.
 #[derive(Default)]
 struct Trouble {
@@ -387,7 +412,8 @@ struct Trouble {
 
 /// What one sub-block gave.
 enum BlockOutcome {
-    /// Records and triangles are in `GpuExtractor::records` and `GpuExtractor::tris`.
+    /// Its records are in `GpuExtractor::records`, its triangles (record indices) appended
+    /// to the mesh.
     Done,
     /// Its triangles would exceed the buffer limit: halve it and redo.
     TooBig,
@@ -414,14 +440,15 @@ pub struct GpuExtractor {
     gather: Vec<f32>,
     /// Vertex records of the last sub-block (block-local edge ids, bit 31 on seams).
     records: Vec<u32>,
-    /// Tile index of each record of the sub-block; scratch of the seam matching.
+    /// Vertex index of each record of the sub-block, where seams matched earlier vertices.
     map: Vec<u32>,
-    /// Records of the vertices a sub-block adds to the mesh, in order.
-    fresh: Vec<u32>,
     /// Vertex of each seam edge made so far in the tile, by tile-local edge id.
     seam: HashMap<u64, u32>,
+    /// Test hooks: a validation error, or a panic, in the next sub-block.
     #[cfg(test)]
     fail_next: bool,
+    #[cfg(test)]
+    panic_next: bool,
 }
 
 impl fmt::Debug for GpuExtractor {
@@ -583,10 +610,11 @@ impl GpuExtractor {
             gather: Vec::new(),
             records: Vec::new(),
             map: Vec::new(),
-            fresh: Vec::new(),
             seam: HashMap::new(),
             #[cfg(test)]
             fail_next: false,
+            #[cfg(test)]
+            panic_next: false,
         })
     }
 
@@ -641,37 +669,44 @@ impl GpuExtractor {
             && let Some(lost) = &t.lost
         {
             self.broken = Some(lost.clone());
-        }
-        let reason = match &self.broken {
-            Some(why) => format!("GPU unusable since an earlier failure: {why}"),
-            None => {
-                let run = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                    self.try_extract(values, dims, origin_node, iso, geom, out)
-                }));
-                match run {
-                    Ok(Ok(stats)) => return Ok(stats),
-                    Ok(Err(e)) => e,
-                    Err(panic) => {
-                        let msg = panic
-                            .downcast_ref::<String>()
-                            .cloned()
-                            .or_else(|| panic.downcast_ref::<&str>().map(|s| s.to_string()))
-                            .unwrap_or_else(|| "unknown panic".to_string());
-                        let why = format!("panic in the GPU path: {msg}");
-                        self.broken = Some(why.clone());
-                        why
-                    }
+            log::warn!(
+                "GPU marching cubes: {lost} ({}); this and later tiles run on the CPU",
+                self.info.name
+            );
+        } else if let Some(why) = &self.broken {
+            log::debug!("tile at node {origin_node:?} on the CPU: the GPU is unusable ({why})");
+        } else {
+            let run = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                self.try_extract(values, dims, origin_node, iso, geom, out)
+            }));
+            let reason = match run {
+                Ok(Ok(stats)) => return Ok(stats),
+                Ok(Err(e)) => e,
+                Err(panic) => {
+                    let msg = panic
+                        .downcast_ref::<String>()
+                        .cloned()
+                        .or_else(|| panic.downcast_ref::<&str>().map(|s| s.to_string()))
+                        .unwrap_or_else(|| "unknown panic".to_string());
+                    let why = format!("panic in the GPU path: {msg}");
+                    self.broken = Some(why.clone());
+                    why
                 }
-            }
-        };
-        log::warn!(
-            "GPU marching cubes failed on the tile of {}×{}×{} nodes at node {origin_node:?} \
-             ({}): {reason}; extracting it on the CPU",
-            dims[0],
-            dims[1],
-            dims[2],
-            self.info.name
-        );
+            };
+            let later = if self.broken.is_some() {
+                "this and later tiles run on the CPU"
+            } else {
+                "extracting it on the CPU"
+            };
+            log::warn!(
+                "GPU marching cubes failed on the tile of {}×{}×{} nodes at node \
+                 {origin_node:?} ({}): {reason}; {later}",
+                dims[0],
+                dims[1],
+                dims[2],
+                self.info.name
+            );
+        }
         let s = self
             .cpu
             .extract(values, dims, origin_node, iso, geom, out)?;
@@ -772,74 +807,99 @@ impl GpuExtractor {
                 .then(|| ([0, 1, 2].map(|d| b.at[d] + local[d] as usize), axis))
         };
         let tile_index = move |p: [usize; 3]| (p[2] * dims[1] + p[1]) * dims[0] + p[0];
-        let mut identity = true;
-        self.fresh.clear();
+        // Seam records whose edge an earlier sub-block already gave a vertex: (record, vertex).
+        // A new vertex's index is `base + record − (matched records before it)`.
+        let mut matched: Vec<(usize, u32)> = Vec::new();
         if b.seam_mask(dims) != 0 {
-            self.map.clear();
-            self.map.reserve(n_records);
-            let mut next = base as u32;
-            for &r in &self.records {
-                if r & SEAM != 0 {
-                    let (p, axis) =
-                        decode(r & !SEAM).ok_or("a vertex record is not an edge of the block")?;
-                    let k = (tile_index(p) * 3 + axis) as u64;
-                    match self.seam.entry(k) {
-                        std::collections::hash_map::Entry::Occupied(o) => {
-                            self.map.push(*o.get());
-                            identity = false;
-                            continue;
-                        }
-                        std::collections::hash_map::Entry::Vacant(v) => {
-                            v.insert(next);
-                        }
+            let on_seam: Vec<usize> = self
+                .records
+                .par_iter()
+                .enumerate()
+                .filter(|(_, r)| *r & SEAM != 0)
+                .map(|(j, _)| j)
+                .collect();
+            for j in on_seam {
+                let (p, axis) = decode(self.records[j] & !SEAM)
+                    .ok_or("a vertex record is not an edge of the block")?;
+                let k = (tile_index(p) * 3 + axis) as u64;
+                match self.seam.entry(k) {
+                    std::collections::hash_map::Entry::Occupied(o) => matched.push((j, *o.get())),
+                    std::collections::hash_map::Entry::Vacant(v) => {
+                        v.insert((base + j - matched.len()) as u32);
                     }
                 }
-                self.map.push(next);
-                self.fresh.push(r & !SEAM);
-                next += 1;
+            }
+            for &(j, _) in &matched {
+                self.records[j] = MATCHED;
             }
         }
-        let fresh: &[u32] = if b.seam_mask(dims) != 0 {
-            &self.fresh
-        } else {
-            &self.records
-        };
+        let fresh = &self.records;
 
         // Keys and positions, vertex by vertex, as the CPU kernel computes them.
         let stride = [1, dims[0], dims[0] * dims[1]];
         let iso64 = iso as f64;
-        out.keys.resize(base + fresh.len(), EdgeKey(0));
-        out.positions.resize(base + fresh.len(), [0.0; 3]);
-        let ok = out.keys[base..]
-            .par_iter_mut()
-            .zip(out.positions[base..].par_iter_mut())
-            .zip(fresh.par_iter())
-            .with_min_len(1 << 12)
-            .all(|((key, pos), &r)| {
-                let Some((p, axis)) = decode(r) else {
-                    return false;
-                };
-                let a = tile_index(p);
-                let g = [0, 1, 2].map(|d| origin_node[d] + p[d] as u64);
-                *key = geom.edge_key(g, axis as u8);
-                *pos = cpu::edge_vertex(geom, g, axis, values[a], values[a + stride[axis]], iso64);
-                true
-            });
-        if !ok {
+        let bad = AtomicBool::new(false);
+        let mut both = (
+            std::mem::take(&mut out.keys),
+            std::mem::take(&mut out.positions),
+        );
+        let vertex = |&r: &u32| {
+            let Some((p, axis)) = decode(r & !SEAM) else {
+                bad.store(true, Ordering::Relaxed);
+                return (EdgeKey(0), [0.0; 3]);
+            };
+            let a = tile_index(p);
+            let g = [0, 1, 2].map(|d| origin_node[d] + p[d] as u64);
+            (
+                geom.edge_key(g, axis as u8),
+                cpu::edge_vertex(geom, g, axis, values[a], values[a + stride[axis]], iso64),
+            )
+        };
+        if matched.is_empty() {
+            both.par_extend(fresh.par_iter().with_min_len(1 << 12).map(vertex));
+        } else {
+            both.par_extend(
+                fresh
+                    .par_iter()
+                    .with_min_len(1 << 12)
+                    .filter(|&&r| r != MATCHED)
+                    .map(vertex),
+            );
+        }
+        (out.keys, out.positions) = both;
+        if bad.load(Ordering::Relaxed) {
             return Err("a vertex record is not an edge of the block".to_string());
         }
 
         // Triangles: record indices to vertex indices.
         let tris = &mut out.triangles[tri_start..];
         let n = n_records as u32;
-        let ok = if identity {
+        let ok = if matched.is_empty() {
             let off = base as u32;
             tris.par_iter_mut().with_min_len(1 << 12).all(|t| {
                 let ok = t.iter().all(|&v| v < n);
-                *t = t.map(|v| v + off);
+                *t = t.map(|v| v.wrapping_add(off));
                 ok
             })
         } else {
+            const RUN: usize = 1 << 16;
+            let matched = &matched;
+            self.map.clear();
+            self.map.par_extend(
+                (0..n_records.div_ceil(RUN))
+                    .into_par_iter()
+                    .flat_map_iter(|c| {
+                        let j0 = c * RUN;
+                        let mut before = matched.partition_point(|m| m.0 < j0);
+                        (j0..n_records.min(j0 + RUN)).map(move |j| match matched.get(before) {
+                            Some(&(m, v)) if m == j => {
+                                before += 1;
+                                v
+                            }
+                            _ => (base + j - before) as u32,
+                        })
+                    }),
+            );
             let map = &self.map;
             tris.par_iter_mut().with_min_len(1 << 12).all(|t| {
                 let ok = t.iter().all(|&v| v < n);
@@ -905,7 +965,7 @@ impl GpuExtractor {
     }
 
     /// Append the first `bytes` bytes of the read-back buffer `buf` to `out`.
-    fn read<T: bytemuck::Pod>(
+    fn read<T: bytemuck::Pod + Send + Sync>(
         &self,
         buf: &wgpu::Buffer,
         bytes: u64,
@@ -928,7 +988,8 @@ impl GpuExtractor {
             let view = buf
                 .get_mapped_range(0..bytes)
                 .map_err(|e| format!("reading back: {e}"))?;
-            out.extend_from_slice(bytemuck::cast_slice(&view));
+            let data: &[T] = bytemuck::cast_slice(&view);
+            out.par_extend(data.par_iter().with_min_len(COPY_CHUNK / 16).copied());
         }
         buf.unmap();
         Ok(())
@@ -949,6 +1010,10 @@ impl GpuExtractor {
         let cap = self.device_max_bytes;
         let dev = self.device.clone();
         let b = &mut self.bufs;
+        #[cfg(test)]
+        if std::mem::take(&mut self.panic_next) {
+            panic!("injected panic");
+        }
         #[cfg(test)]
         if std::mem::take(&mut self.fail_next) {
             // An invalid buffer (MAP_READ only goes with COPY_DST): a validation error,
@@ -971,9 +1036,30 @@ impl GpuExtractor {
             U::STORAGE | U::COPY_DST,
             cap,
         );
-        self.queue
-            .write_buffer(&values_buf, 0, bytemuck::cast_slice(values));
-        self.queue.submit([]);
+        let bytes: &[u8] = bytemuck::cast_slice(values);
+        let len = bytes.len() as u64;
+        let write_usage = U::MAP_WRITE | U::COPY_SRC;
+        let upload = ensure(&dev, &mut b.upload, "values upload", len, write_usage, cap);
+        let (tx, rx) = mpsc::channel();
+        upload.map_async(wgpu::MapMode::Write, 0..len, move |r| {
+            let _ = tx.send(r);
+        });
+        self.wait()?;
+        match rx.try_recv() {
+            Ok(Ok(())) => {}
+            Ok(Err(e)) => return Err(format!("mapping the upload buffer: {e}")),
+            Err(_) => return Err("the upload buffer was not mapped".to_string()),
+        }
+        {
+            let mut view = upload
+                .get_mapped_range_mut(0..len)
+                .map_err(|e| format!("writing the upload buffer: {e}"))?;
+            copy_parallel(view.slice(..), bytes);
+        }
+        upload.unmap();
+        let mut enc = dev.create_command_encoder(&Default::default());
+        enc.copy_buffer_to_buffer(&upload, 0, &values_buf, 0, len);
+        self.queue.submit([enc.finish()]);
         self.wait()?;
         stats.upload_secs += t0.elapsed().as_secs_f64();
 
@@ -1311,6 +1397,28 @@ mod tests {
         assert_eq!(skip_reason(&["llvmpipe".to_string()]), None);
     }
 
+    /// The tables buffer holds exactly the case tables the CPU kernel uses.
+    #[test]
+    fn table_words_match_the_case_tables() {
+        let w = table_words();
+        for case in 0..=255u8 {
+            let c = case as usize;
+            let tris = &w[w[c] as usize..w[c + 1] as usize];
+            let want: Vec<u32> = tables::case_triangles(case)
+                .iter()
+                .flatten()
+                .map(|&e| e as u32)
+                .collect();
+            assert_eq!(tris, &want[..], "case {case}");
+            let used = &w[w[USED_START + c] as usize..w[USED_START + c + 1] as usize];
+            let want: Vec<u32> = tables::case_edges(case).iter().map(|&e| e as u32).collect();
+            assert_eq!(used, &want[..], "case {case}");
+            let info = w[CASE_INFO + c];
+            assert_eq!(info & 15, tables::case_triangles(case).len() as u32);
+            assert_eq!(info >> 4, tables::crossing_edges(case) as u32);
+        }
+    }
+
     #[test]
     fn extractor_is_send() {
         fn send<T: Send>() {}
@@ -1530,7 +1638,7 @@ mod tests {
     }
 
     /// A GPU error on a tile sends it to the CPU: same mesh, `fell_back` set, and the next
-    /// tile runs on the GPU again.
+    /// tile runs on the GPU again; after a panic, all later tiles run on the CPU.
     #[test]
     fn gpu_errors_fall_back_to_the_cpu() {
         let Some(mut g) = gpu() else { return };
@@ -1547,6 +1655,14 @@ mod tests {
         assert!(s.fell_back);
         assert_eq!(got, want);
         assert_same(&mut g, &v, dims, [0; 3], 0.0, &geom);
+        // A panic inside the GPU path: this and later tiles go to the CPU, same mesh.
+        g.panic_next = true;
+        for _ in 0..2 {
+            let s = g.extract(&v, dims, [0; 3], 0.0, &geom, &mut got).unwrap();
+            assert!(s.fell_back);
+            assert_eq!(got, want);
+        }
+        assert!(g.broken.is_some());
     }
 
     /// Bad shapes are the CPU kernel's errors; blocks without cells are empty.

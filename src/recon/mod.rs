@@ -1060,7 +1060,18 @@ pub fn reconstruct(
                         None => read_tile(&tile_path(&tiles_dir, *tt)).map(|m| (*tt, m)),
                         Some(f) => {
                             let mut mesh = TileMesh::default();
-                            g.extract(&f, dims, lo.map(|v| v as u64), iso as f32, &geom, &mut mesh)
+                            // The host side of the GPU call uses rayon: keep it on our pool.
+                            ctx.pool
+                                .install(|| {
+                                    g.extract(
+                                        &f,
+                                        dims,
+                                        lo.map(|v| v as u64),
+                                        iso as f32,
+                                        &geom,
+                                        &mut mesh,
+                                    )
+                                })
                                 .and_then(|_| finish(*tt, mesh))
                         }
                     });
