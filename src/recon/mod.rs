@@ -997,7 +997,6 @@ pub fn reconstruct(
     let stage = ctx.progress.stage("tiles", Some(tiles_total), "tiles");
     let mut tiles_done = 0usize;
     let mut t = 0u64;
-    let tile_level = plan.tile_level;
     let last_tile = |key: crate::extract::cpu::EdgeKey| -> u64 {
         let (node, _axis) = geom.decode_edge(key);
         let c = node.map(|v| (v / plan.tile).min(ntiles_axis - 1) as u32);
@@ -1114,7 +1113,6 @@ pub fn reconstruct(
         stage.inc((t - stage.done()).min(tiles_total));
     }
     stage.finish(None);
-    let _ = tile_level;
     let ws = writer.into_inner().finish()?;
     Ok(ReconStats {
         vertices: ws.vertices,

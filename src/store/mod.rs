@@ -403,7 +403,6 @@ pub fn ingest(
                 chunk_points,
                 &cells_dir,
                 ctx,
-                &stage,
             )?;
             std::fs::remove_file(&cells_out[i].file).with_path(&cells_out[i].file)?;
             done[i] = true;
@@ -614,9 +613,7 @@ fn split_cell(
     chunk_points: u64,
     dir: &Path,
     ctx: &Ctx,
-    stage: &crate::exec::progress::Stage,
 ) -> Result<Vec<(scatter::CellOut, bool)>> {
-    let _ = stage;
     let grid = 1usize << (3 * r);
     let _grid_permit = ctx
         .budget

@@ -88,3 +88,16 @@ pub fn peak_rss(stderr: &str) -> u64 {
         .max()
         .unwrap_or(0)
 }
+
+/// True when python3 can import plyfile (the independent PLY reader `.ci/run` installs);
+/// otherwise prints why the calling test skips.
+pub fn has_plyfile() -> bool {
+    let probe = std::process::Command::new("python3")
+        .args(["-c", "import plyfile"])
+        .output();
+    let ok = matches!(probe, Ok(ref o) if o.status.success());
+    if !ok {
+        eprintln!("skipped: python3 with plyfile is not installed");
+    }
+    ok
+}

@@ -219,11 +219,7 @@ fn corrupt_cell_is_detected() {
 #[test]
 fn independent_reader_agrees() {
     // plyfile (Python) reads what synth writes; .ci/run installs it.
-    let probe = std::process::Command::new("python3")
-        .args(["-c", "import plyfile"])
-        .output();
-    if !matches!(probe, Ok(ref o) if o.status.success()) {
-        eprintln!("skipped: python3 with plyfile is not installed");
+    if !has_plyfile() {
         return;
     }
     let d = tempfile::tempdir().unwrap();

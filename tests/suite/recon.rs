@@ -115,11 +115,7 @@ fn seams_and_threads_do_not_change_the_mesh() {
 
 #[test]
 fn independent_reader_opens_the_mesh() {
-    let probe = std::process::Command::new("python3")
-        .args(["-c", "import plyfile"])
-        .output();
-    if !matches!(probe, Ok(ref o) if o.status.success()) {
-        eprintln!("skipped: python3 with plyfile is not installed");
+    if !has_plyfile() {
         return;
     }
     let d = tempfile::tempdir().unwrap();
