@@ -23,6 +23,7 @@ pub mod exec;
 pub mod extract;
 pub mod io;
 pub mod metrics;
+pub mod normals;
 pub mod recon;
 pub mod store;
 pub mod synth;

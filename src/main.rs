@@ -33,6 +33,39 @@ struct Common {
     progress: String,
 }
 
+/// Normal estimation options (ingest and reconstruct).
+#[derive(Args, Debug, Clone)]
+struct NormalOpts {
+    /// Normals: auto (the inputs' when every input has them, else estimated), use (the
+    /// inputs'; an error without them), estimate (ignore the inputs' normals).
+    #[arg(long, default_value = "auto")]
+    normals: String,
+    /// Neighbours per plane fit when estimating normals (the point itself included).
+    #[arg(long, default_value_t = scanflow::normals::DEFAULT_K)]
+    neighbours: usize,
+    /// Re-fit each estimated normal once with robust (Cauchy) weights: less pulled by noise
+    /// and outliers, a little slower.
+    #[arg(long)]
+    robust_normals: bool,
+    /// Scanner position x,y,z (common frame) that estimated normals face: once for all inputs,
+    /// or once per input file in order. `.conf` scans take theirs from their pose.
+    #[arg(long, value_name = "X,Y,Z")]
+    viewpoint: Vec<String>,
+}
+
+impl NormalOpts {
+    fn mode(&self) -> Result<scanflow::normals::NormalsMode> {
+        Ok(self.normals.parse()?)
+    }
+
+    fn params(&self) -> scanflow::normals::NormalParams {
+        scanflow::normals::NormalParams {
+            k: self.neighbours,
+            robust: self.robust_normals,
+        }
+    }
+}
+
 #[derive(Subcommand, Debug)]
 enum Cmd {
     /// Write oriented samples of a synthetic shape, with its exact description (.truth.json).
@@ -73,6 +106,8 @@ enum Cmd {
         /// zstd level of cell files (-7 fastest .. 19 smallest).
         #[arg(long, default_value_t = -1, allow_negative_numbers = true)]
         zstd_level: i32,
+        #[command(flatten)]
+        normal: NormalOpts,
         #[command(flatten)]
         common: Common,
     },
@@ -117,6 +152,8 @@ enum Cmd {
         /// (measured on an H100: 20.8 s against 15.3 s, identical files).
         #[arg(long, default_value = "off")]
         gpu: String,
+        #[command(flatten)]
+        normal: NormalOpts,
         #[command(flatten)]
         common: Common,
     },
@@ -237,20 +274,36 @@ fn run(cli: Cli) -> Result<()> {
             max_cell_points,
             skip_invalid,
             zstd_level,
+            normal,
             common,
         } => {
             if !(-7..=19).contains(&zstd_level) {
                 anyhow::bail!("--zstd-level {zstd_level}: expected -7 ..= 19");
             }
             let ctx = ctx(&common)?;
-            let specs = input_specs(&inputs, conf.as_deref())?;
+            let specs = input_specs(&inputs, conf.as_deref(), &normal.viewpoint)?;
             let params = IngestParams {
                 max_cell_points,
                 skip_invalid,
                 zstd_level,
+                normals: normal.mode()?,
+                normal_params: normal.params(),
                 ..Default::default()
             };
             let st = scanflow::store::ingest(&specs, &output, &params, &ctx)?;
+            if let Some((n, secs)) = &st.normals {
+                println!(
+                    "estimated normals for {} points in {:.2} s ({:.2} M points/s; k = {}, {} by viewpoint, {} by propagation, {} degenerate, {} components)",
+                    st.points,
+                    secs,
+                    st.points as f64 / secs / 1e6,
+                    n.k,
+                    n.by_viewpoint,
+                    n.by_propagation,
+                    n.degenerate,
+                    n.components
+                );
+            }
             println!(
                 "ingested {} points ({} skipped as invalid) into {} cells of {} in {:.2} s: {:.2} M points/s, store {}, peak memory {}",
                 st.points,
@@ -276,6 +329,7 @@ fn run(cli: Cli) -> Result<()> {
             min_points,
             trim,
             gpu,
+            normal,
             common,
         } => {
             let ctx = ctx(&common)?;
@@ -296,7 +350,15 @@ fn run(cli: Cli) -> Result<()> {
             params.min_points = min_points;
             params.trim = trim;
             params.gpu = gpu.parse()?;
-            let st = reconstruct(&ctx, &inputs, conf.as_deref(), &output, params, keep_work)?;
+            let st = reconstruct(
+                &ctx,
+                &inputs,
+                conf.as_deref(),
+                &output,
+                params,
+                keep_work,
+                &normal,
+            )?;
             println!(
                 "reconstructed {} vertices, {} triangles into {} in {:.2} s ({} leaves, {} refined, iso {:.4}), peak memory {}",
                 st.vertices,
@@ -362,7 +424,21 @@ fn run(cli: Cli) -> Result<()> {
                 rep.points, rep.secs
             );
             let params = scanflow::recon::ReconParams::new(9, work);
-            let st = reconstruct(&ctx, std::slice::from_ref(&ply), None, &mesh, params, false)?;
+            let normal = NormalOpts {
+                normals: "auto".into(),
+                neighbours: scanflow::normals::DEFAULT_K,
+                robust_normals: false,
+                viewpoint: Vec::new(),
+            };
+            let st = reconstruct(
+                &ctx,
+                std::slice::from_ref(&ply),
+                None,
+                &mesh,
+                params,
+                false,
+                &normal,
+            )?;
             let total = t0.elapsed().as_secs_f64();
             let check = scanflow::metrics::run_check(
                 &mesh,
@@ -420,14 +496,22 @@ fn reconstruct(
     output: &Path,
     params: scanflow::recon::ReconParams,
     keep_work: bool,
+    normal: &NormalOpts,
 ) -> Result<scanflow::recon::ReconStats> {
     let work = params.work_dir.clone();
     let resume = params.resume;
     // One directory argument is a store; anything else is ingested into the work dir.
+    let mode = normal.mode()?;
     let store_dir = if conf.is_none() && inputs.len() == 1 && inputs[0].is_dir() {
+        if mode != scanflow::normals::NormalsMode::Auto || !normal.viewpoint.is_empty() {
+            log::warn!(
+                "{}: a store keeps the normals it was ingested with; --normals and --viewpoint apply to `ingest`",
+                inputs[0].display()
+            );
+        }
         inputs[0].clone()
     } else {
-        let specs = input_specs(inputs, conf)?;
+        let specs = input_specs(inputs, conf, &normal.viewpoint)?;
         let dir = work.join("store");
         if !(resume && dir.join("manifest.json").exists()) {
             if dir.exists() && !resume {
@@ -441,6 +525,8 @@ fn reconstruct(
             // Small cells: leaves read the store cells around them through a small cache.
             let ingest = IngestParams {
                 max_cell_points: 1 << 18,
+                normals: mode,
+                normal_params: normal.params(),
                 ..Default::default()
             };
             scanflow::store::ingest(&specs, &dir, &ingest, ctx)?;
@@ -456,16 +542,53 @@ fn reconstruct(
     Ok(st)
 }
 
-fn input_specs(inputs: &[PathBuf], conf: Option<&Path>) -> Result<Vec<InputSpec>> {
+fn input_specs(
+    inputs: &[PathBuf],
+    conf: Option<&Path>,
+    viewpoints: &[String],
+) -> Result<Vec<InputSpec>> {
     let mut specs = Vec::new();
     if let Some(c) = conf {
         specs.extend(scanflow::io::conf::read_conf(c)?);
     }
+    let from_conf = specs.len();
     specs.extend(inputs.iter().map(InputSpec::plain));
     if specs.is_empty() {
         anyhow::bail!("no input: give point files, a store, or --conf FILE");
     }
+    let parsed: Vec<[f64; 3]> = viewpoints
+        .iter()
+        .map(|v| parse_point(v))
+        .collect::<Result<_>>()?;
+    let files = &mut specs[from_conf..];
+    match parsed.len() {
+        0 => {}
+        1 => files
+            .iter_mut()
+            .for_each(|s| s.viewpoint = Some(scanflow::types::Viewpoint::Point(parsed[0]))),
+        n if n == files.len() => {
+            for (s, p) in files.iter_mut().zip(parsed) {
+                s.viewpoint = Some(scanflow::types::Viewpoint::Point(p));
+            }
+        }
+        n => anyhow::bail!(
+            "--viewpoint given {n} times for {} input files: give it once for all, or once per file",
+            files.len()
+        ),
+    }
     Ok(specs)
+}
+
+/// `x,y,z` as three finite numbers.
+fn parse_point(s: &str) -> Result<[f64; 3]> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|t| t.trim().parse::<f64>())
+        .collect::<std::result::Result<_, _>>()
+        .ok()
+        .filter(|v: &Vec<f64>| v.len() == 3 && v.iter().all(|x| x.is_finite()))
+        .with_context(|| format!("--viewpoint \"{s}\": expected three numbers x,y,z"))?;
+    Ok([v[0], v[1], v[2]])
 }
 
 fn info(ctx: &Ctx, path: &Path, json: bool) -> Result<()> {

@@ -228,6 +228,10 @@ pub struct Attributes {
     pub intensity: bool,
     /// Per-point confidence.
     pub confidence: bool,
+    /// Index of the input (scan) each point came from, kept when a scan's viewpoint is known
+    /// so that normals can be oriented toward it.
+    #[serde(default)]
+    pub source: bool,
 }
 
 impl Attributes {
@@ -239,6 +243,7 @@ impl Attributes {
             alpha: self.alpha && o.alpha,
             intensity: self.intensity && o.intensity,
             confidence: self.confidence && o.confidence,
+            source: self.source && o.source,
         }
     }
 
@@ -260,6 +265,9 @@ impl Attributes {
         if self.confidence {
             v.push("confidence");
         }
+        if self.source {
+            v.push("scan");
+        }
         v
     }
 }
@@ -278,6 +286,8 @@ pub struct PointBatch {
     pub intensity: Vec<f32>,
     /// Confidence.
     pub confidence: Vec<f32>,
+    /// Index of the input each point came from.
+    pub source: Vec<u16>,
 }
 
 impl PointBatch {
@@ -298,6 +308,7 @@ impl PointBatch {
         self.color.clear();
         self.intensity.clear();
         self.confidence.clear();
+        self.source.clear();
     }
 
     /// Bytes held by the vectors' contents.
@@ -306,6 +317,7 @@ impl PointBatch {
             + self.normal.capacity() * 12
             + self.color.capacity() * 8
             + (self.intensity.capacity() + self.confidence.capacity()) * 4
+            + self.source.capacity() * 2
     }
 
     /// Apply a rigid transform to positions and normals.
@@ -316,6 +328,34 @@ impl PointBatch {
         for n in &mut self.normal {
             let r = t.rotate([n[0] as f64, n[1] as f64, n[2] as f64]);
             *n = [r[0] as f32, r[1] as f32, r[2] as f32];
+        }
+    }
+}
+
+/// Where a scan was seen from, in the common frame: normals are oriented toward it.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Viewpoint {
+    /// A scanner position (terrestrial scanners, `--viewpoint x,y,z`).
+    Point([f64; 3]),
+    /// A direction toward the scanner, for orthographic or far-away sensors (the
+    /// Cyberware range images of a `.conf` scan: their local `+z`).
+    Direction([f64; 3]),
+}
+
+impl Viewpoint {
+    /// Unit vector from `p` toward the viewpoint (zero when `p` is the viewpoint).
+    #[inline]
+    pub fn toward(&self, p: [f64; 3]) -> [f64; 3] {
+        let d = match *self {
+            Viewpoint::Point(v) => [v[0] - p[0], v[1] - p[1], v[2] - p[2]],
+            Viewpoint::Direction(d) => d,
+        };
+        let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+        if l > 0.0 {
+            [d[0] / l, d[1] / l, d[2] / l]
+        } else {
+            [0.0; 3]
         }
     }
 }

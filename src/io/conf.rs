@@ -7,12 +7,19 @@
 //! the Stanford bunny: with this rule the ten scans land on each other (median distance
 //! between overlapping scans ≈ 0.4 mm); with `R(q)` as written eight of them are centimetres
 //! off. `camera` lines (the viewer's pose) and blank or `#` lines are ignored.
+//!
+//! Each scan is a Cyberware range image seen along its local `+z` axis (an orthographic
+//! sensor), so its [`Viewpoint`] is the direction `R(q)ᵀ ẑ`. Checked on the bunny against the
+//! normals of Stanford's zippered reconstruction: in every one of the ten scans 97.3–98.2% of
+//! the points that lie on the reference (within 1 mm) have a reference normal with a positive
+//! local `z`; the rest are grazing. A scanner *position* at the local origin is wrong for these
+//! files (it agrees with only 3–21% of the normals).
 
 use std::path::Path;
 
 use crate::error::{Error, IoContext, Location, Result};
 use crate::io::InputSpec;
-use crate::types::Rigid;
+use crate::types::{Rigid, Viewpoint};
 
 /// Read a `.conf` file into inputs with their transforms.
 pub fn read_conf(path: &Path) -> Result<Vec<InputSpec>> {
@@ -67,12 +74,12 @@ pub fn read_conf(path: &Path) -> Result<Vec<InputSpec>> {
                     ));
                 }
                 // Conjugate: (x, y, z, -w) is the same rotation as (-x, -y, -z, w).
+                let transform =
+                    Rigid::from_quaternion([v[0], v[1], v[2]], [v[3], v[4], v[5], -v[6]]);
                 out.push(InputSpec {
                     path: file,
-                    transform: Rigid::from_quaternion(
-                        [v[0], v[1], v[2]],
-                        [v[3], v[4], v[5], -v[6]],
-                    ),
+                    transform,
+                    viewpoint: Some(Viewpoint::Direction(transform.rotate([0.0, 0.0, 1.0]))),
                 });
             }
             Some(other) => {

@@ -18,7 +18,7 @@ pub mod xyz;
 use std::path::{Path, PathBuf};
 
 use crate::error::{Error, Location, Result};
-use crate::types::{Attributes, PointBatch, Rigid};
+use crate::types::{Attributes, PointBatch, Rigid, Viewpoint};
 
 /// The formats scanflow reads.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -119,6 +119,8 @@ pub struct InputSpec {
     pub path: PathBuf,
     /// Transform to apply (identity when none).
     pub transform: Rigid,
+    /// Where the scan was seen from, in the common frame, when known.
+    pub viewpoint: Option<Viewpoint>,
 }
 
 impl InputSpec {
@@ -127,6 +129,7 @@ impl InputSpec {
         InputSpec {
             path: path.into(),
             transform: Rigid::IDENTITY,
+            viewpoint: None,
         }
     }
 }

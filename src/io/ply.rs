@@ -480,6 +480,7 @@ impl PlyReader {
             alpha: layout.rgb.is_some() && layout.alpha.is_some(),
             intensity: layout.intensity.is_some(),
             confidence: layout.confidence.is_some(),
+            source: false,
         };
         let stride = if binary { off } else { el.props.len() };
         let mut r = PlyReader {

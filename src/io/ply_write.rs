@@ -380,6 +380,7 @@ mod tests {
             alpha: true,
             intensity: true,
             confidence: true,
+            source: false,
         }
     }
 
@@ -433,6 +434,7 @@ mod tests {
             color: vec![[65535, 0x1234, 257, 0x8000], [0, 255, 256, 65535]],
             intensity: vec![0.5, 7.0],
             confidence: vec![0.25, 1.0],
+            source: vec![],
         };
         w.write(&batch).unwrap();
         w.finish().unwrap();
@@ -493,6 +495,7 @@ mod tests {
             color: vec![[0xff00, 0x7fff, 0x0100, 0]],
             intensity: vec![3.0],
             confidence: vec![],
+            source: vec![],
         })
         .unwrap();
         w.finish().unwrap();

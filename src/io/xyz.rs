@@ -109,6 +109,7 @@ impl Layout {
             alpha: false,
             intensity: self.intensity_at().is_some(),
             confidence: false,
+            source: false,
         }
     }
 }

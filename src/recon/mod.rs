@@ -778,7 +778,7 @@ pub fn reconstruct(
     if !m.attributes.normal {
         return Err(Error::input(
             &store.dir,
-            "the points have no normals (nx ny nz), which reconstruction requires: supply oriented points (e.g. PLY with nx ny nz, or XYZ with 6 columns)",
+            "the store's points have no normals (nx ny nz), which reconstruction requires: ingest it again with --normals auto or estimate, or reconstruct from the point files (normals are then estimated)",
         ));
     }
     if m.point_count < 16 {

@@ -50,6 +50,9 @@ impl RecordLayout {
         if attrs.confidence {
             stride += 4;
         }
+        if attrs.source {
+            stride += 2;
+        }
         RecordLayout {
             attrs,
             pos_f32,
@@ -105,6 +108,10 @@ impl RecordLayout {
         }
         if a.confidence {
             r[o..o + 4].copy_from_slice(&b.confidence[i].to_le_bytes());
+            o += 4;
+        }
+        if a.source {
+            r[o..o + 2].copy_from_slice(&b.source[i].to_le_bytes());
         }
     }
 
@@ -146,6 +153,10 @@ impl RecordLayout {
             }
             if a.confidence {
                 out.confidence.push(f32_at(r, o));
+                o += 4;
+            }
+            if a.source {
+                out.source.push(u16_at(r, o));
             }
         }
     }
@@ -156,6 +167,63 @@ fn arr<const N: usize>(s: &[u8]) -> [u8; N] {
     let mut a = [0u8; N];
     a.copy_from_slice(s);
     a
+}
+
+/// Read every record of the cell file at `path`, checking its record count and CRC-32.
+pub fn read_cell_file(
+    path: &Path,
+    layout: RecordLayout,
+    count: u64,
+    crc32: u32,
+) -> Result<PointBatch> {
+    let mut rd = CellReader::open(path, layout)?;
+    let mut out = PointBatch::default();
+    let mut buf = Vec::new();
+    while rd.read(1 << 16, &mut out, &mut buf)? > 0 {
+        if out.len() as u64 > count {
+            break;
+        }
+    }
+    if out.len() as u64 != count {
+        return Err(Error::input(
+            path,
+            format!(
+                "corrupt cell file: the manifest lists {} points, the file holds {}",
+                count,
+                out.len()
+            ),
+        ));
+    }
+    let crc = rd.finish_crc();
+    if crc != crc32 {
+        return Err(Error::input(
+            path,
+            format!("corrupt cell file: CRC-32 {crc:08x}, the manifest says {crc32:08x}"),
+        ));
+    }
+    Ok(out)
+}
+
+/// Write `b` as a whole cell file at `path` (through a temporary name); returns the compressed
+/// size and its CRC-32.
+pub fn write_cell_file(
+    path: &Path,
+    layout: RecordLayout,
+    b: &PointBatch,
+    zstd_level: i32,
+) -> Result<(u64, u32)> {
+    let mut raw = Vec::with_capacity(b.len() * layout.stride);
+    for i in 0..b.len() {
+        layout.encode(b, i, &mut raw);
+    }
+    let z = zstd::bulk::compress(&raw, zstd_level)
+        .map_err(|e| Error::Internal(format!("zstd compression failed: {e}")))?;
+    let mut tmp = path.as_os_str().to_owned();
+    tmp.push(".tmp");
+    let tmp = std::path::PathBuf::from(tmp);
+    std::fs::write(&tmp, &z).with_path(&tmp)?;
+    std::fs::rename(&tmp, path).with_path(path)?;
+    Ok((z.len() as u64, crc32fast::hash(&z)))
 }
 
 /// Streaming reader of a cell file's records, with a running CRC-32 of the compressed bytes.
@@ -272,6 +340,7 @@ mod tests {
                 alpha: true,
                 intensity: true,
                 confidence: true,
+                source: true,
             },
             Attributes {
                 color: true,
@@ -296,6 +365,9 @@ mod tests {
                 }
                 if attrs.confidence {
                     b.confidence.push(0.25);
+                }
+                if attrs.source {
+                    b.source.push(900 + i);
                 }
             }
             let mut bytes = Vec::new();

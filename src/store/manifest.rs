@@ -6,7 +6,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, IoContext, Result};
 use crate::io::Format;
-use crate::types::{Aabb, Attributes, CellKey, Cube, Rigid};
+use crate::types::{Aabb, Attributes, CellKey, Cube, Rigid, Viewpoint};
 
 /// The `format` field of every store manifest.
 pub const STORE_FORMAT: &str = "scanflow-store";
@@ -48,6 +48,26 @@ pub struct Manifest {
     pub inputs: Vec<InputEntry>,
     /// Non-empty cells in key order.
     pub cells: Vec<CellEntry>,
+    /// How the normals were estimated, when ingest estimated them.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub estimated_normals: Option<EstimatedNormals>,
+}
+
+/// How ingest estimated the normals (absent when they came from the inputs).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EstimatedNormals {
+    /// Neighbours per plane fit.
+    pub k: usize,
+    /// Robust (reweighted) plane fits.
+    pub robust: bool,
+    /// Points without a plane among their neighbours (zero normals).
+    pub degenerate: u64,
+    /// Points whose sign came from their scan's viewpoint.
+    pub by_viewpoint: u64,
+    /// Points oriented by propagation and the outward choice.
+    pub by_propagation: u64,
+    /// Orientation components (connected parts of the neighbour graph).
+    pub components: u64,
 }
 
 /// One input file.
@@ -61,6 +81,9 @@ pub struct InputEntry {
     pub points: u64,
     /// Transform applied.
     pub transform: Rigid,
+    /// Where the scan was seen from, when known (orients estimated normals).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub viewpoint: Option<Viewpoint>,
 }
 
 /// One cell.

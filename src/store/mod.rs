@@ -35,9 +35,12 @@ use rayon::prelude::*;
 use crate::error::{Error, IoContext, Result};
 use crate::exec::Ctx;
 use crate::io::{ChunkSpec, InputSpec, PointReader};
+use crate::normals::{NormalParams, NormalsMode};
 use crate::types::{Aabb, Attributes, CellKey, Cube, MAX_LEVEL, PointBatch, morton3};
 use cell_file::{CellReader, RecordLayout};
-use manifest::{CellEntry, InputEntry, MANIFEST, Manifest, STORE_FORMAT, STORE_VERSION};
+use manifest::{
+    CellEntry, EstimatedNormals, InputEntry, MANIFEST, Manifest, STORE_FORMAT, STORE_VERSION,
+};
 use octree::Hierarchy;
 use scatter::{Grouped, Scatter};
 
@@ -54,6 +57,10 @@ pub struct IngestParams {
     pub zstd_level: i32,
     /// Points per chunk; `None` sizes chunks from the budget.
     pub chunk_points: Option<u64>,
+    /// Where normals come from.
+    pub normals: NormalsMode,
+    /// How they are estimated, when they are.
+    pub normal_params: NormalParams,
 }
 
 impl Default for IngestParams {
@@ -63,6 +70,8 @@ impl Default for IngestParams {
             skip_invalid: false,
             zstd_level: -1,
             chunk_points: None,
+            normals: NormalsMode::Auto,
+            normal_params: NormalParams::default(),
         }
     }
 }
@@ -88,6 +97,8 @@ pub struct IngestStats {
     pub chunk_points: u64,
     /// Counting grid levels.
     pub count_levels: u32,
+    /// Normal estimation, when it ran: what it did and its wall time in seconds.
+    pub normals: Option<(EstimatedNormals, f64)>,
 }
 
 /// The root cube is the bounding box's largest edge enlarged by 10% (PoissonRecon's default
@@ -164,6 +175,33 @@ pub fn ingest(
         .iter()
         .zip(inputs)
         .all(|(r, i)| r.positions_f32() && i.transform.is_identity());
+    // Normals: from the inputs, or estimated once the cells are written (the records then
+    // carry each point's scan while a viewpoint is known, to orient them toward it).
+    let estimate = match params.normals {
+        NormalsMode::Estimate => true,
+        NormalsMode::Auto => !attrs.normal,
+        NormalsMode::Use => {
+            if let Some(r) = readers.iter().find(|r| !r.attributes().normal) {
+                return Err(Error::input(
+                    r.path(),
+                    "has no normals (nx ny nz) and --normals use was given; use --normals auto or estimate to estimate them",
+                ));
+            }
+            false
+        }
+    };
+    let mut attrs = attrs;
+    if estimate {
+        attrs.normal = false;
+        attrs.source = inputs.iter().any(|i| i.viewpoint.is_some());
+        if attrs.source && inputs.len() > u16::MAX as usize + 1 {
+            return Err(Error::Usage(format!(
+                "{} inputs with viewpoints: at most {} are supported",
+                inputs.len(),
+                u16::MAX as usize + 1
+            )));
+        }
+    }
     let layout = RecordLayout::new(attrs, pos_f32);
 
     // Temporary directory next to the destination.
@@ -216,6 +254,10 @@ pub fn ingest(
         let t = &inputs[ri].transform;
         if !t.is_identity() {
             batch.transform(t);
+        }
+        if layout.attrs.source {
+            batch.source.clear();
+            batch.source.resize(batch.len(), ri as u16);
         }
         Ok(st.skipped_invalid)
     };
@@ -446,6 +488,28 @@ pub fn ingest(
         std::fs::remove_file(&c.file).with_path(&c.file)?;
     }
     cells.sort_by_key(|c| c.key);
+    let (attrs, layout, normals) = if estimate {
+        let out_attrs = Attributes {
+            normal: true,
+            ..attrs
+        };
+        let out_layout = RecordLayout::new(out_attrs, pos_f32);
+        let viewpoints: Vec<_> = inputs.iter().map(|i| i.viewpoint).collect();
+        let r = crate::normals::estimate_cells(
+            &tmp,
+            &mut cells,
+            &cube,
+            layout,
+            out_layout,
+            &viewpoints,
+            &params.normal_params,
+            params.zstd_level,
+            ctx,
+        )?;
+        (out_attrs, out_layout, Some(r))
+    } else {
+        (attrs, layout, None)
+    };
     let points: u64 = cells.iter().map(|c| c.count).sum();
     if points + skipped != total {
         return Err(Error::Internal(format!(
@@ -478,9 +542,11 @@ pub fn ingest(
                 format: r.format(),
                 points: r.len(),
                 transform: i.transform,
+                viewpoint: i.viewpoint,
             })
             .collect(),
         cells,
+        estimated_normals: normals.as_ref().map(|n| n.0.clone()),
     };
     manifest.save(&tmp)?;
     if out.exists() {
@@ -501,6 +567,7 @@ pub fn ingest(
         secs: t0.elapsed().as_secs_f64(),
         chunk_points,
         count_levels: levels,
+        normals,
     })
 }
 
@@ -521,6 +588,9 @@ fn record_fields(a: Attributes, pos_f32: bool) -> Vec<String> {
     }
     if a.confidence {
         v.push("confidence:f32".into());
+    }
+    if a.source {
+        v.push("scan:u16".into());
     }
     v
 }
@@ -723,36 +793,7 @@ impl Store {
     /// Read every point of cell `i`, checking its count and checksum.
     pub fn read_cell(&self, i: usize) -> Result<PointBatch> {
         let e = &self.manifest.cells[i];
-        let path = self.cell_path(i);
-        let mut rd = CellReader::open(&path, self.layout)?;
-        let mut out = PointBatch::default();
-        let mut buf = Vec::new();
-        while rd.read(1 << 16, &mut out, &mut buf)? > 0 {
-            if out.len() as u64 > e.count {
-                break;
-            }
-        }
-        if out.len() as u64 != e.count {
-            return Err(Error::input(
-                &path,
-                format!(
-                    "corrupt cell file: the manifest lists {} points, the file holds {}",
-                    e.count,
-                    out.len()
-                ),
-            ));
-        }
-        let crc = rd.finish_crc();
-        if crc != e.crc32 {
-            return Err(Error::input(
-                &path,
-                format!(
-                    "corrupt cell file: CRC-32 {crc:08x}, the manifest says {:08x}",
-                    e.crc32
-                ),
-            ));
-        }
-        Ok(out)
+        cell_file::read_cell_file(&self.cell_path(i), self.layout, e.count, e.crc32)
     }
 }
 

@@ -144,6 +144,7 @@ fn bunny_scans_align_through_conf() {
                     rotation: transposed,
                     translation: s.transform.translation,
                 },
+                viewpoint: s.viewpoint,
             }
         })
         .collect();

@@ -180,9 +180,16 @@ fn bad_reconstruct_input() {
         t += &format!("{} {} {}\n", a.sin(), a.cos(), (a * 0.7).sin());
     }
     std::fs::write(&xyz, &t).unwrap();
-    let err = fails(&["reconstruct", s(&xyz), "-o", s(&d.path().join("o1.ply"))]);
+    let err = fails(&[
+        "reconstruct",
+        s(&xyz),
+        "-o",
+        s(&d.path().join("o1.ply")),
+        "--normals",
+        "use",
+    ]);
     assert!(
-        err.contains("no normals") && err.contains("nx ny nz"),
+        err.contains("no normals") && err.contains("nx ny nz") && err.contains("plain.xyz"),
         "{err}"
     );
     // A plane.

@@ -1,0 +1,315 @@
+//! Nearest neighbours and plane fits.
+//!
+//! The normal at a point is the direction of least variance of its `k` nearest neighbours
+//! (the point itself included): the eigenvector of the smallest eigenvalue of their covariance
+//! `C = Σ (q − q̄)(q − q̄)ᵀ` (Hoppe et al. 1992, §3.2, "tangent plane estimation"). The fit is
+//! done in f64 about the neighbourhood's mean, so it does not lose digits far from the origin.
+//!
+//! `robust` re-fits once with Cauchy weights `w = 1 / (1 + (r/s)²)` of each neighbour's
+//! distance `r` to the first plane, `s` being 1.4826 × the median of those distances: outliers
+//! and points of a second sheet within the neighbourhood then pull the plane far less.
+
+use nalgebra::{Matrix3, SymmetricEigen, Vector3};
+
+/// Exact k-nearest neighbours of the points `queries` (indices into `pts`), handed to `f` as
+/// `(squared distance, index)` lists, nearest first, ties by index.
+///
+/// Points are bucketed in a hashed-free sparse grid (sorted voxel keys) of voxels 1.5× the
+/// typical k-th neighbour distance (measured on a sample). Queries are taken voxel by voxel:
+/// the points of the 27 voxels around a voxel are gathered once and serve every query in it.
+/// A query's answer is final when its k-th distance is within the block's reach (the distance
+/// from the query to the block's faces); the rare rest fall back to a kd-tree.
+pub fn knn_all(pts: &[[f32; 3]], queries: &[u32], k: usize, mut f: impl FnMut(u32, &[(f32, u32)])) {
+    let n = pts.len();
+    let k = k.min(n);
+    if k == 0 || queries.is_empty() {
+        for &q in queries {
+            f(q, &[]);
+        }
+        return;
+    }
+    let mut lo = [f32::INFINITY; 3];
+    for p in pts {
+        for a in 0..3 {
+            lo[a] = lo[a].min(p[a]);
+        }
+    }
+    // Median k-th neighbour distance of up to 16 evenly spaced points.
+    let mut radii = Vec::new();
+    let mut d2 = Vec::with_capacity(n);
+    for i in (0..n).step_by((n / 16).max(1)).take(16) {
+        d2.clear();
+        let q = pts[i];
+        d2.extend(pts.iter().map(|p| dist2(*p, q)));
+        let (_, v, _) = d2.select_nth_unstable_by(k - 1, |a, b| a.total_cmp(b));
+        radii.push(v.sqrt());
+    }
+    radii.sort_by(|a, b| a.total_cmp(b));
+    let mut s = 1.5 * radii[radii.len() / 2];
+    let span = pts
+        .iter()
+        .map(|p| (0..3).map(|a| p[a] - lo[a]).fold(0f32, f32::max))
+        .fold(0f32, f32::max);
+    // At most 2^20 voxels per axis; a positive size.
+    s = s.max(span / ((1u32 << 20) - 2) as f32);
+    if s.is_nan() || s <= 0.0 {
+        s = 1.0;
+    }
+    let inv = 1.0 / s;
+    let vox = |p: [f32; 3]| -> [u32; 3] { [0, 1, 2].map(|a| ((p[a] - lo[a]) * inv) as u32 + 1) };
+    let key = |c: [u32; 3]| -> u64 { ((c[2] as u64) << 42) | ((c[1] as u64) << 21) | c[0] as u64 };
+    let mut by_key: Vec<(u64, u32)> = pts
+        .iter()
+        .enumerate()
+        .map(|(i, p)| (key(vox(*p)), i as u32))
+        .collect();
+    by_key.sort_unstable();
+    let mut keys: Vec<u64> = Vec::new();
+    let mut start: Vec<u32> = Vec::new();
+    for (j, &(kk, _)) in by_key.iter().enumerate() {
+        if keys.last() != Some(&kk) {
+            keys.push(kk);
+            start.push(j as u32);
+        }
+    }
+    start.push(n as u32);
+    let mut qs: Vec<(u64, u32)> = queries
+        .iter()
+        .map(|&q| (key(vox(pts[q as usize])), q))
+        .collect();
+    qs.sort_unstable();
+    let mut tree: Option<kiddo::immutable::float::kdtree::ImmutableKdTree<f32, u32, 3, 32>> = None;
+    let mut cand: Vec<([f32; 3], u32)> = Vec::new();
+    let mut best: Vec<(f32, u32)> = Vec::new();
+    let mut g = 0;
+    while g < qs.len() {
+        let kk = qs[g].0;
+        let mut e = g;
+        while e < qs.len() && qs[e].0 == kk {
+            e += 1;
+        }
+        let c = [kk & 0x1f_ffff, (kk >> 21) & 0x1f_ffff, kk >> 42].map(|v| v as u32);
+        cand.clear();
+        for dz in 0..3u32 {
+            for dy in 0..3u32 {
+                let row = key([c[0] - 1, c[1] + dy - 1, c[2] + dz - 1]);
+                // The three voxels of a row are consecutive keys.
+                let from = keys.partition_point(|&x| x < row);
+                let to = keys.partition_point(|&x| x < row + 3);
+                if from < to {
+                    for &(_, i) in &by_key[start[from] as usize..start[to] as usize] {
+                        cand.push((pts[i as usize], i));
+                    }
+                }
+            }
+        }
+        let vlo = [0, 1, 2].map(|a| lo[a] + (c[a] - 1) as f32 * s);
+        for &(_, q) in &qs[g..e] {
+            let p = pts[q as usize];
+            best.clear();
+            best.extend(cand.iter().map(|&(cp, ci)| (dist2(cp, p), ci)));
+            let by = |a: &(f32, u32), b: &(f32, u32)| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1));
+            if best.len() > k {
+                best.select_nth_unstable_by(k - 1, by);
+                best.truncate(k);
+            }
+            best.sort_unstable_by(by);
+            let inner = (0..3)
+                .map(|a| (p[a] - vlo[a]).min(vlo[a] + s - p[a]))
+                .fold(f32::INFINITY, f32::min)
+                .max(0.0);
+            let reach = s + inner;
+            if best.len() == k && best[k - 1].0 <= reach * reach {
+                f(q, &best);
+                continue;
+            }
+            let t = tree.get_or_insert_with(|| {
+                kiddo::immutable::float::kdtree::ImmutableKdTree::new_from_slice(pts)
+            });
+            best.clear();
+            let kz = std::num::NonZero::new(k).unwrap_or(std::num::NonZero::<usize>::MIN);
+            for nb in t.nearest_n::<kiddo::SquaredEuclidean>(&p, kz) {
+                best.push((nb.distance, nb.item));
+            }
+            best.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+            f(q, &best);
+        }
+        g = e;
+    }
+}
+
+#[inline(always)]
+fn dist2(a: [f32; 3], b: [f32; 3]) -> f32 {
+    let d = [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+    d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
+}
+
+/// Unit normal of the plane through `nbrs` (indices into `pts`); `None` when fewer than three
+/// points or when they span no plane (all on one line or one point).
+pub fn fit_normal(pts: &[[f32; 3]], nbrs: &[(f32, u32)], robust: bool) -> Option<[f32; 3]> {
+    if nbrs.len() < 3 {
+        return None;
+    }
+    let n = plane(pts, nbrs, None)?;
+    if !robust {
+        return Some(n.1);
+    }
+    let (c, nrm) = n;
+    let mut r: Vec<f64> = nbrs
+        .iter()
+        .map(|&(_, i)| {
+            let p = pts[i as usize];
+            ((p[0] as f64 - c[0]) * nrm[0] as f64
+                + (p[1] as f64 - c[1]) * nrm[1] as f64
+                + (p[2] as f64 - c[2]) * nrm[2] as f64)
+                .abs()
+        })
+        .collect();
+    let mut sorted = r.clone();
+    sorted.sort_by(|a, b| a.total_cmp(b));
+    let s = 1.4826 * sorted[sorted.len() / 2];
+    if s <= 0.0 {
+        return Some(nrm);
+    }
+    for v in &mut r {
+        *v = 1.0 / (1.0 + (*v / s) * (*v / s));
+    }
+    Some(plane(pts, nbrs, Some(&r)).map_or(nrm, |p| p.1))
+}
+
+/// Weighted mean and least-variance direction of the neighbours.
+fn plane(pts: &[[f32; 3]], nbrs: &[(f32, u32)], w: Option<&[f64]>) -> Option<([f64; 3], [f32; 3])> {
+    let mut sw = 0.0;
+    let mut m = [0f64; 3];
+    for (j, &(_, i)) in nbrs.iter().enumerate() {
+        let wj = w.map_or(1.0, |w| w[j]);
+        let p = pts[i as usize];
+        sw += wj;
+        for a in 0..3 {
+            m[a] += wj * p[a] as f64;
+        }
+    }
+    if sw <= 0.0 {
+        return None;
+    }
+    m = m.map(|v| v / sw);
+    let mut c = [0f64; 6];
+    for (j, &(_, i)) in nbrs.iter().enumerate() {
+        let wj = w.map_or(1.0, |w| w[j]);
+        let p = pts[i as usize];
+        let d = [p[0] as f64 - m[0], p[1] as f64 - m[1], p[2] as f64 - m[2]];
+        c[0] += wj * d[0] * d[0];
+        c[1] += wj * d[0] * d[1];
+        c[2] += wj * d[0] * d[2];
+        c[3] += wj * d[1] * d[1];
+        c[4] += wj * d[1] * d[2];
+        c[5] += wj * d[2] * d[2];
+    }
+    let mat = Matrix3::new(c[0], c[1], c[2], c[1], c[3], c[4], c[2], c[4], c[5]);
+    let e = SymmetricEigen::new(mat);
+    let mut order = [0usize, 1, 2];
+    order.sort_by(|&a, &b| e.eigenvalues[a].total_cmp(&e.eigenvalues[b]));
+    let (lo, mid, hi) = (
+        e.eigenvalues[order[0]],
+        e.eigenvalues[order[1]],
+        e.eigenvalues[order[2]],
+    );
+    // A line or a point has no plane: the two smallest variances are both ~0.
+    if mid.is_nan() || mid <= 1e-10 * hi || !lo.is_finite() {
+        return None;
+    }
+    let v: Vector3<f64> = e.eigenvectors.column(order[0]).into();
+    let l = v.norm();
+    if l.is_nan() || l <= 0.0 {
+        return None;
+    }
+    Some((m, [(v[0] / l) as f32, (v[1] / l) as f32, (v[2] / l) as f32]))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn grid_knn_equals_brute_force() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(7);
+        // A curved sheet plus a few far points and duplicates.
+        let mut pts: Vec<[f32; 3]> = (0..3000)
+            .map(|_| {
+                let (u, v): (f32, f32) = (rng.random(), rng.random());
+                [u, v, 0.3 * (4.0 * u).sin() * v]
+            })
+            .collect();
+        pts.extend([[5.0, 5.0, 5.0], [-3.0, 0.0, 1.0], pts[10], pts[10]]);
+        let queries: Vec<u32> = (0..pts.len() as u32).step_by(37).collect();
+        for k in [1, 7, 20, 64] {
+            let mut answers = Vec::new();
+            knn_all(&pts, &queries, k, |q, l| answers.push((q, l.to_vec())));
+            assert_eq!(answers.len(), queries.len());
+            for (qi, got) in answers {
+                let q = &pts[qi as usize];
+                let mut want: Vec<(f32, u32)> = pts
+                    .iter()
+                    .enumerate()
+                    .map(|(i, p)| (dist2(*p, *q), i as u32))
+                    .collect();
+                want.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+                want.truncate(k);
+                assert_eq!(got, want, "query {qi}, k {k}");
+            }
+        }
+        // The far points too.
+        knn_all(&pts, &[3000], 5, |_, l| assert_eq!(l[0], (0.0, 3000)));
+    }
+
+    #[test]
+    fn plane_normal_of_a_tilted_grid() {
+        // Points on z = 0.5 x + 0.25 y: normal ∝ (-0.5, -0.25, 1).
+        let mut pts = Vec::new();
+        for i in 0..10 {
+            for j in 0..10 {
+                let (x, y) = (i as f32 * 0.1, j as f32 * 0.1);
+                pts.push([x, y, 0.5 * x + 0.25 * y]);
+            }
+        }
+        let mut nb = Vec::new();
+        knn_all(&pts, &[55], 20, |_, l| nb = l.to_vec());
+        assert_eq!(nb.len(), 20);
+        assert_eq!(nb[0].1, 55);
+        let want = {
+            let v = [-0.5f32, -0.25, 1.0];
+            let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+            v.map(|c| c / l)
+        };
+        for robust in [false, true] {
+            let n = fit_normal(&pts, &nb, robust).unwrap();
+            let dot = (n[0] * want[0] + n[1] * want[1] + n[2] * want[2]).abs();
+            assert!(dot > 0.99999, "{n:?}");
+        }
+    }
+
+    #[test]
+    fn robust_fit_ignores_an_outlier() {
+        let mut pts = Vec::new();
+        for i in 0..5 {
+            for j in 0..4 {
+                pts.push([i as f32 * 0.1, j as f32 * 0.1, 0.0]);
+            }
+        }
+        pts.push([0.2, 0.15, 0.3]);
+        let nb: Vec<(f32, u32)> = (0..pts.len() as u32).map(|i| (0.0, i)).collect();
+        let plain = fit_normal(&pts, &nb, false).unwrap();
+        let robust = fit_normal(&pts, &nb, true).unwrap();
+        assert!(robust[2].abs() > plain[2].abs());
+        assert!(robust[2].abs() > 0.999, "{robust:?}");
+    }
+
+    #[test]
+    fn a_line_has_no_normal() {
+        let pts: Vec<[f32; 3]> = (0..10).map(|i| [i as f32, 2.0 * i as f32, 0.0]).collect();
+        let nb: Vec<(f32, u32)> = (0..10).map(|i| (0.0, i)).collect();
+        assert!(fit_normal(&pts, &nb, false).is_none());
+        assert!(fit_normal(&pts[..2], &nb[..2], false).is_none());
+    }
+}
