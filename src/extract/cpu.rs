@@ -100,6 +100,8 @@ pub struct TileMesh {
     pub positions: Vec<[f64; 3]>,
     /// Triangles, as indices into `keys` and `positions`.
     pub triangles: Vec<[u32; 3]>,
+    /// Colour of each vertex (empty when the input points have none).
+    pub colors: Vec<[u8; 3]>,
 }
 
 impl TileMesh {
@@ -108,6 +110,7 @@ impl TileMesh {
         self.keys.clear();
         self.positions.clear();
         self.triangles.clear();
+        self.colors.clear();
     }
 }
 

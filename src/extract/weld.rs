@@ -66,7 +66,7 @@ impl Welder {
     ///
     /// `last_tile(key)` is the largest tile number that can contain `key` (the caller knows
     /// the tiling); keys with `last_tile(key) > t` are kept in the frontier, the others are
-    /// released after this tile. Calls `emit_vertex(global_index, position)` once per new
+    /// released after this tile. Calls `emit_vertex(global_index, tile_index, position)` once per new
     /// vertex, in increasing index order, then `emit_triangle` for every triangle of the tile,
     /// with global indices; so a triangle only names vertices already emitted.
     ///
@@ -78,7 +78,7 @@ impl Welder {
         t: u64,
         mesh: &TileMesh,
         last_tile: impl Fn(EdgeKey) -> u64,
-        mut emit_vertex: impl FnMut(u64, [f64; 3]) -> Result<()>,
+        mut emit_vertex: impl FnMut(u64, usize, [f64; 3]) -> Result<()>,
         mut emit_triangle: impl FnMut([u64; 3]) -> Result<()>,
     ) -> Result<()> {
         if let Some(prev) = self.last
@@ -97,7 +97,7 @@ impl Welder {
             )));
         }
         self.local.clear();
-        for (&key, &p) in mesh.keys.iter().zip(&mesh.positions) {
+        for (i, (&key, &p)) in mesh.keys.iter().zip(&mesh.positions).enumerate() {
             if let Some(&g) = self.frontier.get(&key) {
                 self.local.push(g);
                 continue;
@@ -111,7 +111,7 @@ impl Welder {
             }
             let g = self.next;
             self.next += 1;
-            emit_vertex(g, p)?;
+            emit_vertex(g, i, p)?;
             if lt > t {
                 self.frontier.insert(key, g);
                 self.expiry.entry(lt).or_default().push(key);
@@ -233,7 +233,7 @@ mod tests {
                     t as u64,
                     &mesh,
                     last_tile,
-                    |i, p| {
+                    |i, _, p| {
                         assert_eq!(i as usize, verts.len(), "vertices out of order");
                         verts.push(p);
                         emitted.set(verts.len());
@@ -300,20 +300,20 @@ mod tests {
             .extract(&v, [2, 2, 2], [0; 3], 0.0, &g, &mut mesh)
             .unwrap();
         let mut w = Welder::new();
-        w.add_tile(3, &mesh, |_| 5, |_, _| Ok(()), |_| Ok(()))
+        w.add_tile(3, &mesh, |_| 5, |_, _, _| Ok(()), |_| Ok(()))
             .unwrap();
         assert_eq!(w.frontier_len(), 3);
-        let e = w.add_tile(3, &mesh, |_| 5, |_, _| Ok(()), |_| Ok(()));
+        let e = w.add_tile(3, &mesh, |_| 5, |_, _, _| Ok(()), |_| Ok(()));
         assert!(matches!(e, Err(Error::Internal(_))));
 
         let mut w = Welder::new();
-        let e = w.add_tile(3, &mesh, |_| 2, |_, _| Ok(()), |_| Ok(()));
+        let e = w.add_tile(3, &mesh, |_| 2, |_, _, _| Ok(()), |_| Ok(()));
         assert!(matches!(e, Err(Error::Internal(_))));
 
         let mut bad = mesh.clone();
         bad.triangles.push([0, 1, 9]);
         let mut w = Welder::new();
-        let e = w.add_tile(0, &bad, |_| 0, |_, _| Ok(()), |_| Ok(()));
+        let e = w.add_tile(0, &bad, |_| 0, |_, _, _| Ok(()), |_| Ok(()));
         assert!(matches!(e, Err(Error::Internal(_))));
     }
 
@@ -332,7 +332,7 @@ mod tests {
             0,
             &mesh,
             |_| 4,
-            |_, _| {
+            |_, _, _| {
                 n += 1;
                 Ok(())
             },
@@ -341,7 +341,7 @@ mod tests {
         .unwrap();
         assert_eq!((n, w.frontier_len()), (3, 3));
         // Tile 5 is empty but comes after every key's last tile.
-        w.add_tile(5, &TileMesh::default(), |_| 5, |_, _| Ok(()), |_| Ok(()))
+        w.add_tile(5, &TileMesh::default(), |_| 5, |_, _, _| Ok(()), |_| Ok(()))
             .unwrap();
         assert_eq!(w.frontier_len(), 0);
         assert_eq!(w.peak_frontier(), 3);
@@ -362,7 +362,7 @@ mod tests {
             0,
             &mesh,
             |_| 0,
-            |_, _| Ok(()),
+            |_, _, _| Ok(()),
             |_| Err(Error::Usage("disk full".into())),
         );
         assert!(matches!(e, Err(Error::Usage(_))));

@@ -357,6 +357,7 @@ impl CoarseField {
 struct SortedCell {
     pos: Vec<[f64; 3]>,
     nrm: Vec<[f32; 3]>,
+    col: Vec<[u16; 4]>,
     ranges: Vec<(CellKey, usize, usize)>,
 }
 
@@ -371,6 +372,11 @@ impl SortedCell {
         order.sort_by_key(|&i| (keys[i as usize], i));
         let pos: Vec<[f64; 3]> = order.iter().map(|&i| b.pos[i as usize]).collect();
         let nrm: Vec<[f32; 3]> = order.iter().map(|&i| b.normal[i as usize]).collect();
+        let col: Vec<[u16; 4]> = if b.color.is_empty() {
+            Vec::new()
+        } else {
+            order.iter().map(|&i| b.color[i as usize]).collect()
+        };
         let mut ranges = Vec::new();
         let mut s = 0;
         for (j, &i) in order.iter().enumerate() {
@@ -380,11 +386,16 @@ impl SortedCell {
                 s = j + 1;
             }
         }
-        SortedCell { pos, nrm, ranges }
+        SortedCell {
+            pos,
+            nrm,
+            col,
+            ranges,
+        }
     }
 
     fn bytes(&self) -> u64 {
-        (self.pos.len() * 36 + self.ranges.len() * 24) as u64
+        (self.pos.len() * 36 + self.col.len() * 8 + self.ranges.len() * 24) as u64
     }
 
     fn range(&self, k: CellKey) -> (usize, usize) {
@@ -474,6 +485,48 @@ impl<'a> PointSource<'a> {
         Ok(c)
     }
 
+    /// The coloured points within `margin` of the box `lo..hi` (world), widening the margin
+    /// (doubling, up to 6 times) while none is found.
+    fn colour_points(&mut self, lo: [f64; 3], hi: [f64; 3], margin: f64) -> Result<ColourPoints> {
+        let mut out = ColourPoints::default();
+        let lvl = self.plan.leaf_level;
+        let side = 1i64 << lvl;
+        let mut m = margin;
+        for _ in 0..7 {
+            let a = lo.map(|v| v - m);
+            let b = hi.map(|v| v + m);
+            let ca = self.plan.cube.cell_coords(a, lvl).map(|v| v as i64);
+            let cb = self.plan.cube.cell_coords(b, lvl).map(|v| v as i64);
+            for z in ca[2].max(0)..=cb[2].min(side - 1) {
+                for y in ca[1].max(0)..=cb[1].min(side - 1) {
+                    for x in ca[0].max(0)..=cb[0].min(side - 1) {
+                        let k = CellKey::new(lvl, [x as u32, y as u32, z as u32]);
+                        for si in self.covering(k) {
+                            let sc = self.cell(si)?;
+                            if sc.col.is_empty() {
+                                continue;
+                            }
+                            let (s0, e0) = sc.range(k);
+                            for j in s0..e0 {
+                                let p = sc.pos[j];
+                                if (0..3).all(|q| p[q] >= a[q] && p[q] <= b[q]) {
+                                    out.pos.push(p);
+                                    let c = sc.col[j];
+                                    out.col.push([c[0], c[1], c[2]]);
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+            if !out.pos.is_empty() {
+                break;
+            }
+            m *= 2.0;
+        }
+        Ok(out)
+    }
+
     /// The points of leaf `key`'s 1.8× box, and how many of them (the first ones) lie in the
     /// cell itself.
     fn gather(&mut self, key: CellKey) -> Result<LeafPoints> {
@@ -514,6 +567,49 @@ impl<'a> PointSource<'a> {
         own.pos.extend(rest.pos);
         own.nrm.extend(rest.nrm);
         Ok(own)
+    }
+}
+
+/// Input points with their colours near a tile.
+#[derive(Default)]
+struct ColourPoints {
+    pos: Vec<[f64; 3]>,
+    col: Vec<[u16; 3]>,
+}
+
+/// Number of input points blended into a vertex's colour.
+const COLOUR_NEIGHBOURS: usize = 4;
+
+impl ColourPoints {
+    /// Colours of `vertices`: the inverse-distance blend of the [`COLOUR_NEIGHBOURS`] nearest
+    /// input points (weights `1/max(d, h/100)`, `h` the voxel size), the 16-bit channels taken
+    /// to 8 bits by rounding `v/257`. Grey where no coloured point was found.
+    fn colours(&self, vertices: &[[f64; 3]], h: f64) -> Vec<[u8; 3]> {
+        if self.pos.is_empty() {
+            return vec![[128; 3]; vertices.len()];
+        }
+        let tree: kiddo::immutable::float::kdtree::ImmutableKdTree<f64, u32, 3, 32> =
+            kiddo::immutable::float::kdtree::ImmutableKdTree::new_from_slice(&self.pos);
+        let k = std::num::NonZero::new(COLOUR_NEIGHBOURS.min(self.pos.len()))
+            .unwrap_or(std::num::NonZero::<usize>::MIN);
+        vertices
+            .iter()
+            .map(|v| {
+                let mut nb = tree.nearest_n::<kiddo::SquaredEuclidean>(v, k);
+                nb.sort_by(|a, b| a.distance.total_cmp(&b.distance).then(a.item.cmp(&b.item)));
+                let mut acc = [0f64; 3];
+                let mut sw = 0.0;
+                for x in &nb {
+                    let w = 1.0 / x.distance.sqrt().max(h * 0.01);
+                    let c = self.col[x.item as usize];
+                    for a in 0..3 {
+                        acc[a] += w * c[a] as f64;
+                    }
+                    sw += w;
+                }
+                acc.map(|c| ((c / sw) / 257.0).round().clamp(0.0, 255.0) as u8)
+            })
+            .collect()
     }
 }
 
@@ -684,18 +780,20 @@ fn read_leaf(dir: &Path, key: CellKey, m: usize) -> Result<LeafDetail> {
     })
 }
 
-const TILE_MAGIC: &[u8; 8] = b"SFTILE01";
+const TILE_MAGIC: &[u8; 8] = b"SFTILE02";
 
 fn tile_path(dir: &Path, t: u64) -> PathBuf {
     dir.join(format!("{t:016x}.zst"))
 }
 
-/// Checkpoint a tile's mesh (after trimming): edge keys, f64 positions, triangles.
+/// Checkpoint a tile's mesh (after trimming): edge keys, f64 positions, triangles, then the
+/// vertex colours when there are any.
 fn write_tile(path: &Path, m: &TileMesh) -> Result<()> {
-    let mut raw = Vec::with_capacity(24 + m.keys.len() * 32 + m.triangles.len() * 12);
+    let mut raw = Vec::with_capacity(32 + m.keys.len() * 35 + m.triangles.len() * 12);
     raw.extend_from_slice(TILE_MAGIC);
     raw.extend_from_slice(&(m.keys.len() as u64).to_le_bytes());
     raw.extend_from_slice(&(m.triangles.len() as u64).to_le_bytes());
+    raw.extend_from_slice(&(m.colors.len() as u64).to_le_bytes());
     for k in &m.keys {
         raw.extend_from_slice(&k.0.to_le_bytes());
     }
@@ -709,6 +807,9 @@ fn write_tile(path: &Path, m: &TileMesh) -> Result<()> {
             raw.extend_from_slice(&v.to_le_bytes());
         }
     }
+    for c in &m.colors {
+        raw.extend_from_slice(c);
+    }
     let z = zstd::bulk::compress(&raw, 1)
         .map_err(|e| Error::Internal(format!("zstd compression failed: {e}")))?;
     let tmp = path.with_extension("tmp");
@@ -720,7 +821,7 @@ fn read_tile(path: &Path) -> Result<TileMesh> {
     let z = std::fs::read(path).with_path(path)?;
     let bad = |what: &str| Error::input(path, format!("corrupt tile checkpoint: {what}"));
     let raw = zstd::stream::decode_all(&z[..]).map_err(|e| bad(&e.to_string()))?;
-    if raw.len() < 24 || &raw[..8] != TILE_MAGIC {
+    if raw.len() < 32 || &raw[..8] != TILE_MAGIC {
         return Err(bad("wrong magic"));
     }
     let u64_at = |o: usize| {
@@ -728,12 +829,12 @@ fn read_tile(path: &Path) -> Result<TileMesh> {
         a.copy_from_slice(&raw[o..o + 8]);
         u64::from_le_bytes(a)
     };
-    let (nv, nt) = (u64_at(8) as usize, u64_at(16) as usize);
-    if raw.len() != 24 + nv * 32 + nt * 12 {
+    let (nv, nt, nc) = (u64_at(8) as usize, u64_at(16) as usize, u64_at(24) as usize);
+    if !(nc == 0 || nc == nv) || raw.len() != 32 + nv * 32 + nt * 12 + nc * 3 {
         return Err(bad("wrong size"));
     }
     let mut m = TileMesh::default();
-    let mut o = 24;
+    let mut o = 32;
     for _ in 0..nv {
         m.keys.push(crate::extract::cpu::EdgeKey(u64_at(o)));
         o += 8;
@@ -750,6 +851,9 @@ fn read_tile(path: &Path) -> Result<TileMesh> {
             o += 4;
         }
         m.triangles.push(t);
+    }
+    for c in raw[o..].chunks_exact(3) {
+        m.colors.push([c[0], c[1], c[2]]);
     }
     Ok(m)
 }
@@ -963,7 +1067,8 @@ pub fn reconstruct(
         stage.inc(wave_keys.len() as u64);
     }
     stage.finish(None);
-    drop(src);
+    let with_color = m.attributes.color;
+    let mut colour_src = with_color.then_some(src);
     let iso = if iso_count > 0 {
         iso_sum / iso_count as f64
     } else {
@@ -985,7 +1090,7 @@ pub fn reconstruct(
     if let Some(g) = &gpu {
         log::info!("extracting tiles on the GPU: {}", g.adapter_name());
     }
-    let writer = std::cell::RefCell::new(MeshPlyWriter::create(out, false)?);
+    let writer = std::cell::RefCell::new(MeshPlyWriter::create(out, with_color)?);
     let mut welder = Welder::new();
     // Tiles in Morton order reuse the leaves of their neighbours: the cache keeps twice the
     // leaves of the last wave (the next wave's tiles are its neighbours), within a sixth of
@@ -1019,11 +1124,21 @@ pub fn reconstruct(
         }
         detail_cache.fit(2 * wave_tiles.iter().map(|w| w.2.len()).sum::<usize>());
         let mut loaded = Vec::with_capacity(wave_tiles.len());
+        let mut colour_pts: Vec<Option<ColourPoints>> = Vec::with_capacity(wave_tiles.len());
         for (tt, lo, near) in &wave_tiles {
             if params.resume && tile_path(&tiles_dir, *tt).exists() {
                 loaded.push((*tt, *lo, None));
+                colour_pts.push(None);
                 continue;
             }
+            colour_pts.push(match colour_src.as_mut() {
+                Some(src) => {
+                    let a = plan.node_pos(*lo);
+                    let b = plan.node_pos(lo.map(|v| v + plan.tile as i64));
+                    Some(src.colour_points(a, b, plan.h * plan.e as f64 * 0.25)?)
+                }
+                None => None,
+            });
             let mut ds = Vec::with_capacity(near.len());
             for k in near {
                 ds.push((*k, detail_cache.get(*k)?));
@@ -1034,13 +1149,17 @@ pub fn reconstruct(
             .budget
             .acquire(loaded.len() as u64 * tile_nodes * 12, "a wave of tiles")?;
         let dims = [(plan.tile + 1) as usize; 3];
-        let finish = |tt: u64, mut mesh: TileMesh| -> Result<(u64, TileMesh)> {
-            if params.trim {
-                trim_mesh(&mut mesh, |c| support.near(c));
-            }
-            write_tile(&tile_path(&tiles_dir, tt), &mesh)?;
-            Ok((tt, mesh))
-        };
+        let finish =
+            |tt: u64, mut mesh: TileMesh, cp: &Option<ColourPoints>| -> Result<(u64, TileMesh)> {
+                if params.trim {
+                    trim_mesh(&mut mesh, |c| support.near(c));
+                }
+                if let Some(cp) = cp {
+                    mesh.colors = cp.colours(&mesh.positions, plan.h);
+                }
+                write_tile(&tile_path(&tiles_dir, tt), &mesh)?;
+                Ok((tt, mesh))
+            };
         let meshes: Vec<Result<(u64, TileMesh)>> = match gpu.as_mut() {
             // GPU: fields built in parallel on the CPU, extracted tile by tile on the device.
             Some(g) => {
@@ -1054,7 +1173,7 @@ pub fn reconstruct(
                         .collect()
                 });
                 let mut out = Vec::with_capacity(loaded.len());
-                for ((tt, lo, _), f) in loaded.iter().zip(fields) {
+                for (((tt, lo, _), f), cp) in loaded.iter().zip(fields).zip(&colour_pts) {
                     out.push(match f {
                         None => read_tile(&tile_path(&tiles_dir, *tt)).map(|m| (*tt, m)),
                         Some(f) => {
@@ -1071,7 +1190,7 @@ pub fn reconstruct(
                                         &mut mesh,
                                     )
                                 })
-                                .and_then(|_| finish(*tt, mesh))
+                                .and_then(|_| ctx.pool.install(|| finish(*tt, mesh, cp)))
                         }
                     });
                 }
@@ -1080,7 +1199,8 @@ pub fn reconstruct(
             None => ctx.pool.install(|| {
                 loaded
                     .par_iter()
-                    .map(|(tt, lo, ds)| {
+                    .zip(colour_pts.par_iter())
+                    .map(|((tt, lo, ds), cp)| {
                         let Some(ds) = ds else {
                             return Ok((*tt, read_tile(&tile_path(&tiles_dir, *tt))?));
                         };
@@ -1094,7 +1214,7 @@ pub fn reconstruct(
                             &geom,
                             &mut mesh,
                         );
-                        finish(*tt, mesh)
+                        finish(*tt, mesh, cp)
                     })
                     .collect()
             }),
@@ -1105,7 +1225,7 @@ pub fn reconstruct(
                 tt,
                 &mesh,
                 last_tile,
-                |_, p| writer.borrow_mut().vertex(p, None),
+                |_, i, p| writer.borrow_mut().vertex(p, mesh.colors.get(i).copied()),
                 |tri| writer.borrow_mut().triangle(tri),
             )?;
             tiles_done += 1;
@@ -1187,6 +1307,7 @@ fn trim_mesh(mesh: &mut TileMesh, keep: impl Fn([f64; 3]) -> bool) {
     let mut tris = Vec::with_capacity(mesh.triangles.len());
     let mut keys = Vec::new();
     let mut positions = Vec::new();
+    let mut colors = Vec::new();
     for t in &mesh.triangles {
         let p = t.map(|i| mesh.positions[i as usize]);
         let c = [0, 1, 2].map(|a| (p[0][a] + p[1][a] + p[2][a]) / 3.0);
@@ -1199,6 +1320,9 @@ fn trim_mesh(mesh: &mut TileMesh, keep: impl Fn([f64; 3]) -> bool) {
                 used[i] = keys.len() as u32;
                 keys.push(mesh.keys[i]);
                 positions.push(mesh.positions[i]);
+                if let Some(c) = mesh.colors.get(i) {
+                    colors.push(*c);
+                }
             }
             used[i]
         });
@@ -1207,6 +1331,7 @@ fn trim_mesh(mesh: &mut TileMesh, keep: impl Fn([f64; 3]) -> bool) {
     mesh.triangles = tris;
     mesh.keys = keys;
     mesh.positions = positions;
+    mesh.colors = colors;
 }
 
 /// Refuse point sets that span no volume: a plane or a line has no inside.

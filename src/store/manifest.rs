@@ -84,6 +84,13 @@ pub struct InputEntry {
     /// Where the scan was seen from, when known (orients estimated normals).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub viewpoint: Option<Viewpoint>,
+    /// Factor its colours were scaled by to 16 bits (257 for 8-bit colour in LAS fields).
+    #[serde(default = "one")]
+    pub color_scale: u32,
+}
+
+fn one() -> u32 {
+    1
 }
 
 /// One cell.

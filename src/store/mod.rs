@@ -191,6 +191,20 @@ pub fn ingest(
         }
     };
     let mut attrs = attrs;
+    // Airborne LiDAR is seen from above: LAS inputs without a viewpoint face up.
+    let mut inputs_vp: Vec<InputSpec> = inputs.to_vec();
+    if estimate {
+        for (i, r) in inputs_vp.iter_mut().zip(&readers) {
+            if i.viewpoint.is_none() && r.format() == crate::io::Format::Las {
+                log::info!(
+                    "{}: LAS without --viewpoint: normals face up (+z), as seen from the air",
+                    i.path.display()
+                );
+                i.viewpoint = Some(crate::types::Viewpoint::Direction([0.0, 0.0, 1.0]));
+            }
+        }
+    }
+    let inputs = &inputs_vp[..];
     if estimate {
         attrs.normal = false;
         attrs.source = inputs.iter().any(|i| i.viewpoint.is_some());
@@ -248,9 +262,36 @@ pub fn ingest(
         .map(|i| std::fs::metadata(&i.path).map(|m| m.len()).unwrap_or(0))
         .sum();
 
+    // LAS files often hold 8-bit colour in their 16-bit fields: the count pass records each
+    // input's largest channel, and an input whose colours all fit 0..=255 is scaled by 257
+    // when stored (the store's colours are always 16-bit).
+    let max_color: Vec<std::sync::atomic::AtomicU16> = readers
+        .iter()
+        .map(|_| std::sync::atomic::AtomicU16::new(0))
+        .collect();
+    let scale8: Vec<std::sync::atomic::AtomicBool> = readers
+        .iter()
+        .map(|_| std::sync::atomic::AtomicBool::new(false))
+        .collect();
     let load = |batch: &mut PointBatch, ri: usize, spec: &ChunkSpec| -> Result<u64> {
         batch.clear();
         let st = readers[ri].read_chunk(spec, params.skip_invalid, batch)?;
+        if attrs.color && readers[ri].format() == crate::io::Format::Las {
+            let m = batch
+                .color
+                .iter()
+                .map(|c| c[0].max(c[1]).max(c[2]))
+                .max()
+                .unwrap_or(0);
+            max_color[ri].fetch_max(m, Ordering::Relaxed);
+            if scale8[ri].load(Ordering::Relaxed) {
+                for c in &mut batch.color {
+                    for v in &mut c[..3] {
+                        *v = v.saturating_mul(257);
+                    }
+                }
+            }
+        }
         let t = &inputs[ri].transform;
         if !t.is_identity() {
             batch.transform(t);
@@ -365,6 +406,16 @@ pub fn ingest(
         if !b.is_empty() {
             cube = Cube::around(&b, CUBE_MARGIN);
             (counts, bounds, skipped) = count(&cube)?;
+        }
+    }
+    for (ri, r) in readers.iter().enumerate() {
+        let m = max_color[ri].load(Ordering::Relaxed);
+        if attrs.color && r.format() == crate::io::Format::Las && m <= 255 {
+            log::info!(
+                "{}: colours are 8-bit (at most {m}) in 16-bit fields; scaled by 257",
+                r.path().display()
+            );
+            scale8[ri].store(true, Ordering::Relaxed);
         }
     }
     if bounds.is_empty() {
@@ -537,12 +588,18 @@ pub fn ingest(
         inputs: inputs
             .iter()
             .zip(&readers)
-            .map(|(i, r)| InputEntry {
+            .enumerate()
+            .map(|(k, (i, r))| InputEntry {
                 path: i.path.display().to_string(),
                 format: r.format(),
                 points: r.len(),
                 transform: i.transform,
                 viewpoint: i.viewpoint,
+                color_scale: if scale8[k].load(Ordering::Relaxed) {
+                    257
+                } else {
+                    1
+                },
             })
             .collect(),
         cells,
