@@ -297,7 +297,7 @@ mod tests {
                 pts.push([i as f32 * 0.1, j as f32 * 0.1, 0.0]);
             }
         }
-        pts.push([0.2, 0.15, 0.3]);
+        pts.push([0.45, 0.35, 0.3]);
         let nb: Vec<(f32, u32)> = (0..pts.len() as u32).map(|i| (0.0, i)).collect();
         let plain = fit_normal(&pts, &nb, false).unwrap();
         let robust = fit_normal(&pts, &nb, true).unwrap();

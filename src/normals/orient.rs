@@ -281,7 +281,7 @@ pub fn orient_nodes(nodes: &[Node], edges: &[(u32, u32, f64)]) -> (Vec<bool>, us
         if seen[root as usize] || (root == v && adj[v as usize].is_empty()) {
             continue;
         }
-        trees += (root != v) as usize;
+        trees += 1;
         seen[root as usize] = true;
         let mut members = vec![root];
         stack.push(root);
@@ -378,12 +378,12 @@ mod tests {
         let (flip, trees) = orient_nodes(&nodes, &[(0, 1, -3.0)]);
         assert_eq!(trees, 1);
         assert_eq!(flip, vec![false, true]);
-        // Both inward: the hull flips both.
+        // Both inward and consistent with each other: the hull flips both.
         let nodes = [
             node([1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], 0.0),
             node([-1.0, 0.0, 0.0], [1.0, 0.0, 0.0], 0.0),
         ];
-        let (flip, _) = orient_nodes(&nodes, &[(0, 1, -3.0)]);
+        let (flip, _) = orient_nodes(&nodes, &[(0, 1, 3.0)]);
         assert_eq!(flip, vec![true, true]);
     }
 
