@@ -146,6 +146,11 @@ enum Cmd {
         /// Leave the surface open where no input point supports it.
         #[arg(long)]
         trim: bool,
+        /// Width in voxels of the Gaussian that smooths the normal field before the solve
+        /// (Kazhdan 2005): larger is smoother and more robust to noise, smaller follows the
+        /// points more closely.
+        #[arg(long, default_value_t = 1.0)]
+        smooth: f64,
         /// Marching cubes on the GPU: auto (a discrete or integrated GPU when present), on
         /// (any Vulkan/Metal/DX12 adapter, software ones included), off. Off by default: with
         /// the field built on the CPU, the per-tile upload makes the GPU path slower end to end
@@ -195,6 +200,19 @@ enum Cmd {
         #[command(flatten)]
         common: Common,
     },
+}
+
+/// `println!` that ends the process quietly when stdout is a closed pipe (`scanflow ... | head`)
+/// instead of panicking.
+macro_rules! outln {
+    ($($t:tt)*) => {{
+        use std::io::Write as _;
+        if let Err(e) = writeln!(std::io::stdout(), $($t)*) {
+            if e.kind() == std::io::ErrorKind::BrokenPipe {
+                std::process::exit(0);
+            }
+        }
+    }};
 }
 
 struct Logger;
@@ -259,7 +277,7 @@ fn run(cli: Cli) -> Result<()> {
         } => {
             let ctx = ctx(&common)?;
             let report = synth(&ctx, &shape, points, noise, seed, &output)?;
-            println!(
+            outln!(
                 "wrote {} points of {} to {} in {:.2} s",
                 report.points,
                 shape,
@@ -292,7 +310,7 @@ fn run(cli: Cli) -> Result<()> {
             };
             let st = scanflow::store::ingest(&specs, &output, &params, &ctx)?;
             if let Some((n, secs)) = &st.normals {
-                println!(
+                outln!(
                     "estimated normals for {} points in {:.2} s ({:.2} M points/s; k = {}, {} by viewpoint, {} by propagation, {} degenerate, {} components)",
                     st.points,
                     secs,
@@ -304,7 +322,7 @@ fn run(cli: Cli) -> Result<()> {
                     n.components
                 );
             }
-            println!(
+            outln!(
                 "ingested {} points ({} skipped as invalid) into {} cells of {} in {:.2} s: {:.2} M points/s, store {}, peak memory {}",
                 st.points,
                 st.skipped_invalid,
@@ -328,10 +346,14 @@ fn run(cli: Cli) -> Result<()> {
             error,
             min_points,
             trim,
+            smooth,
             gpu,
             normal,
             common,
         } => {
+            if !(smooth > 0.0 && smooth <= 8.0) {
+                anyhow::bail!("--smooth {smooth}: expected a width in voxels in (0, 8]");
+            }
             let ctx = ctx(&common)?;
             if !(error >= 0.0 && error.is_finite()) {
                 anyhow::bail!(
@@ -349,6 +371,7 @@ fn run(cli: Cli) -> Result<()> {
             params.error = error;
             params.min_points = min_points;
             params.trim = trim;
+            params.sigma_vox = smooth;
             params.gpu = gpu.parse()?;
             let st = reconstruct(
                 &ctx,
@@ -359,7 +382,7 @@ fn run(cli: Cli) -> Result<()> {
                 keep_work,
                 &normal,
             )?;
-            println!(
+            outln!(
                 "reconstructed {} vertices, {} triangles into {} in {:.2} s ({} leaves, {} refined, iso {:.4}), peak memory {}",
                 st.vertices,
                 st.faces,
@@ -385,9 +408,9 @@ fn run(cli: Cli) -> Result<()> {
                 samples,
             )?;
             if json {
-                println!("{}", serde_json::to_string(&rep)?);
+                outln!("{}", serde_json::to_string(&rep)?);
             } else {
-                println!("{rep}");
+                outln!("{rep}");
             }
         }
         Cmd::Info { path, json, common } => {
@@ -419,9 +442,10 @@ fn run(cli: Cli) -> Result<()> {
                 }
             }
             let rep = synth(&ctx, "bumpy", points, 0.001, 1, &ply)?;
-            println!(
+            outln!(
                 "synthesised {} points of a bumpy sphere (noise 0.001) in {:.2} s",
-                rep.points, rep.secs
+                rep.points,
+                rep.secs
             );
             let params = scanflow::recon::ReconParams::new(9, work);
             let normal = NormalOpts {
@@ -446,15 +470,15 @@ fn run(cli: Cli) -> Result<()> {
                 None,
                 200_000,
             )?;
-            println!(
+            outln!(
                 "reconstructed {} at depth 9 in {:.2} s: {} vertices, {} triangles",
                 mesh.display(),
                 st.secs,
                 st.vertices,
                 st.faces
             );
-            println!("{check}");
-            println!(
+            outln!("{check}");
+            outln!(
                 "demo done in {:.2} s, peak memory {}",
                 total,
                 human_bytes(peak_rss_bytes())
@@ -619,16 +643,16 @@ fn info(ctx: &Ctx, path: &Path, json: bool) -> Result<()> {
                 "cell_size_histogram": hist.iter().map(|(b, n)| serde_json::json!({"min_points": if *b == 0 {0} else {1u64 << (b - 1)}, "max_points": (1u64 << b) - 1, "cells": n})).collect::<Vec<_>>(),
                 "inputs": m.inputs,
             });
-            println!("{v}");
+            outln!("{v}");
             return Ok(());
         }
-        println!("store       {}", path.display());
-        println!("points      {}", m.point_count);
+        outln!("store       {}", path.display());
+        outln!("points      {}", m.point_count);
         if m.skipped_invalid > 0 {
-            println!("skipped     {} invalid points", m.skipped_invalid);
+            outln!("skipped     {} invalid points", m.skipped_invalid);
         }
-        println!("attributes  {}", m.attributes.names().join(" "));
-        println!(
+        outln!("attributes  {}", m.attributes.names().join(" "));
+        outln!(
             "bounds      [{:.6}, {:.6}, {:.6}] .. [{:.6}, {:.6}, {:.6}]",
             m.bounds.min[0],
             m.bounds.min[1],
@@ -637,14 +661,14 @@ fn info(ctx: &Ctx, path: &Path, json: bool) -> Result<()> {
             m.bounds.max[1],
             m.bounds.max[2]
         );
-        println!("inputs      {}", m.inputs.len());
-        println!(
+        outln!("inputs      {}", m.inputs.len());
+        outln!(
             "cells       {} ({}, {:.2} bytes/point)",
             m.cells.len(),
             human_bytes(bytes),
             bytes as f64 / m.point_count.max(1) as f64
         );
-        println!(
+        outln!(
             "levels      {}",
             levels
                 .iter()
@@ -652,12 +676,12 @@ fn info(ctx: &Ctx, path: &Path, json: bool) -> Result<()> {
                 .collect::<Vec<_>>()
                 .join(" ")
         );
-        println!("cell sizes (points per cell):");
+        outln!("cell sizes (points per cell):");
         let most = hist.values().copied().max().unwrap_or(1);
         for (b, n) in &hist {
             let lo = if *b == 0 { 0 } else { 1u64 << (b - 1) };
             let hi = (1u64 << b) - 1;
-            println!(
+            outln!(
                 "  {:>10} .. {:<10} {:>6} {}",
                 lo,
                 hi,
@@ -669,14 +693,14 @@ fn info(ctx: &Ctx, path: &Path, json: bool) -> Result<()> {
     }
     let fi = scanflow::store::file_info(path, ctx)?;
     if json {
-        println!("{}", serde_json::to_string(&fi)?);
+        outln!("{}", serde_json::to_string(&fi)?);
         return Ok(());
     }
-    println!("file        {}", fi.path);
-    println!("format      {}", fi.format.name());
-    println!("points      {}", fi.points);
-    println!("attributes  {}", fi.attributes.join(" "));
-    println!(
+    outln!("file        {}", fi.path);
+    outln!("format      {}", fi.format.name());
+    outln!("points      {}", fi.points);
+    outln!("attributes  {}", fi.attributes.join(" "));
+    outln!(
         "bounds      [{:.6}, {:.6}, {:.6}] .. [{:.6}, {:.6}, {:.6}]",
         fi.bounds.min[0],
         fi.bounds.min[1],
@@ -686,7 +710,7 @@ fn info(ctx: &Ctx, path: &Path, json: bool) -> Result<()> {
         fi.bounds.max[2]
     );
     if fi.invalid_points > 0 {
-        println!(
+        outln!(
             "invalid     {} points with NaN/infinite coordinates",
             fi.invalid_points
         );

@@ -9,7 +9,7 @@
 //! distance `r` to the first plane, `s` being 1.4826 × the median of those distances: outliers
 //! and points of a second sheet within the neighbourhood then pull the plane far less.
 
-use nalgebra::{Matrix3, SymmetricEigen, Vector3};
+use nalgebra::{Matrix3, Vector3};
 
 /// Exact k-nearest neighbours of the points `queries` (indices into `pts`), handed to `f` as
 /// `(squared distance, index)` lists, nearest first, ties by index.
@@ -19,14 +19,22 @@ use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 /// the points of the 27 voxels around a voxel are gathered once and serve every query in it.
 /// A query's answer is final when its k-th distance is within the block's reach (the distance
 /// from the query to the block's faces); the rare rest fall back to a kd-tree.
-pub fn knn_all(pts: &[[f32; 3]], queries: &[u32], k: usize, mut f: impl FnMut(u32, &[(f32, u32)])) {
+/// `typical` is the typical k-th neighbour distance when the caller knows it (it is measured
+/// on a sample otherwise); returns the one used.
+pub fn knn_all(
+    pts: &[[f32; 3]],
+    queries: &[u32],
+    k: usize,
+    typical: Option<f32>,
+    mut f: impl FnMut(u32, &[(f32, u32)]),
+) -> f32 {
     let n = pts.len();
     let k = k.min(n);
     if k == 0 || queries.is_empty() {
         for &q in queries {
             f(q, &[]);
         }
-        return;
+        return typical.unwrap_or(0.0);
     }
     let mut lo = [f32::INFINITY; 3];
     for p in pts {
@@ -34,18 +42,23 @@ pub fn knn_all(pts: &[[f32; 3]], queries: &[u32], k: usize, mut f: impl FnMut(u3
             lo[a] = lo[a].min(p[a]);
         }
     }
-    // Median k-th neighbour distance of up to 16 evenly spaced points.
-    let mut radii = Vec::new();
-    let mut d2 = Vec::with_capacity(n);
-    for i in (0..n).step_by((n / 16).max(1)).take(16) {
-        d2.clear();
-        let q = pts[i];
-        d2.extend(pts.iter().map(|p| dist2(*p, q)));
-        let (_, v, _) = d2.select_nth_unstable_by(k - 1, |a, b| a.total_cmp(b));
-        radii.push(v.sqrt());
-    }
-    radii.sort_by(|a, b| a.total_cmp(b));
-    let mut s = 1.5 * radii[radii.len() / 2];
+    // Median k-th neighbour distance of up to 9 evenly spaced points, unless given.
+    let typical = typical.filter(|t| *t > 0.0).unwrap_or_else(|| {
+        let mut radii = Vec::new();
+        let mut d2: Vec<f32> = Vec::with_capacity(n);
+        for i in (0..n).step_by((n / 9).max(1)).take(9) {
+            d2.clear();
+            let q = pts[i];
+            d2.extend(pts.iter().map(|p| dist2(*p, q)));
+            let (_, v, _) = d2.select_nth_unstable_by(k - 1, |a, b| a.total_cmp(b));
+            radii.push(v.sqrt());
+        }
+        radii.sort_by(|a, b| a.total_cmp(b));
+        radii[radii.len() / 2]
+    });
+    let mut d2: Vec<f32> = Vec::new();
+    let mut prev_dk2 = typical * typical;
+    let mut s = 1.2 * typical;
     let span = pts
         .iter()
         .map(|p| (0..3).map(|a| p[a] - lo[a]).fold(0f32, f32::max))
@@ -63,7 +76,7 @@ pub fn knn_all(pts: &[[f32; 3]], queries: &[u32], k: usize, mut f: impl FnMut(u3
         .enumerate()
         .map(|(i, p)| (key(vox(*p)), i as u32))
         .collect();
-    by_key.sort_unstable();
+    radix_sort(&mut by_key);
     let mut keys: Vec<u64> = Vec::new();
     let mut start: Vec<u32> = Vec::new();
     for (j, &(kk, _)) in by_key.iter().enumerate() {
@@ -77,10 +90,11 @@ pub fn knn_all(pts: &[[f32; 3]], queries: &[u32], k: usize, mut f: impl FnMut(u3
         .iter()
         .map(|&q| (key(vox(pts[q as usize])), q))
         .collect();
-    qs.sort_unstable();
+    radix_sort(&mut qs);
     let mut tree: Option<kiddo::immutable::float::kdtree::ImmutableKdTree<f32, u32, 3, 32>> = None;
     let mut cand: Vec<([f32; 3], u32)> = Vec::new();
     let mut best: Vec<(f32, u32)> = Vec::new();
+    let (mut cx, mut cy, mut cz) = (Vec::new(), Vec::new(), Vec::new());
     let mut g = 0;
     while g < qs.len() {
         let kk = qs[g].0;
@@ -104,16 +118,46 @@ pub fn knn_all(pts: &[[f32; 3]], queries: &[u32], k: usize, mut f: impl FnMut(u3
             }
         }
         let vlo = [0, 1, 2].map(|a| lo[a] + (c[a] - 1) as f32 * s);
+        cx.clear();
+        cy.clear();
+        cz.clear();
+        for &(cp, _) in &cand {
+            cx.push(cp[0]);
+            cy.push(cp[1]);
+            cz.push(cp[2]);
+        }
         for &(_, q) in &qs[g..e] {
             let p = pts[q as usize];
-            best.clear();
-            best.extend(cand.iter().map(|&(cp, ci)| (dist2(cp, p), ci)));
+            d2.clear();
+            d2.extend(cx.iter().zip(&cy).zip(&cz).map(|((x, y), z)| {
+                let d = [x - p[0], y - p[1], z - p[2]];
+                d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
+            }));
+            // A guess of the k-th distance from the previous query (neighbouring queries have
+            // similar ones): when at least k candidates lie within it, the k nearest are among
+            // them, so the guess prunes without changing the answer; otherwise all are kept.
+            let tau = prev_dk2 * 1.35;
+            best.resize(cand.len(), (0.0, 0));
+            let mut m = 0;
+            for (&d, c) in d2.iter().zip(&cand) {
+                best[m] = (d, c.1);
+                m += (d <= tau) as usize;
+            }
+            best.truncate(m);
+            if m < k {
+                best.clear();
+                best.extend(d2.iter().zip(&cand).map(|(&d, c)| (d, c.1)));
+            }
             let by = |a: &(f32, u32), b: &(f32, u32)| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1));
-            if best.len() > k {
+            if best.len() > 2 * k {
                 best.select_nth_unstable_by(k - 1, by);
                 best.truncate(k);
             }
-            best.sort_unstable_by(by);
+            insertion_sort(&mut best, by);
+            best.truncate(k);
+            if best.len() == k {
+                prev_dk2 = best[k - 1].0;
+            }
             let inner = (0..3)
                 .map(|a| (p[a] - vlo[a]).min(vlo[a] + s - p[a]))
                 .fold(f32::INFINITY, f32::min)
@@ -135,6 +179,52 @@ pub fn knn_all(pts: &[[f32; 3]], queries: &[u32], k: usize, mut f: impl FnMut(u3
             f(q, &best);
         }
         g = e;
+    }
+    typical
+}
+
+/// Sort a short slice in place (a few dozen entries: fewer moves than a general sort).
+#[inline]
+fn insertion_sort<T: Copy>(v: &mut [T], by: impl Fn(&T, &T) -> std::cmp::Ordering) {
+    for i in 1..v.len() {
+        let x = v[i];
+        let mut j = i;
+        while j > 0 && by(&x, &v[j - 1]).is_lt() {
+            v[j] = v[j - 1];
+            j -= 1;
+        }
+        v[j] = x;
+    }
+}
+
+/// Stable least-significant-digit radix sort of `(key, value)` pairs by key, a byte at a
+/// time, skipping the bytes every key shares (voxel keys use few of their 64 bits).
+fn radix_sort(v: &mut Vec<(u64, u32)>) {
+    let (mut or, mut and) = (0u64, u64::MAX);
+    for &(k, _) in v.iter() {
+        or |= k;
+        and &= k;
+    }
+    let varying = or ^ and;
+    let mut tmp = vec![(0u64, 0u32); v.len()];
+    for byte in 0..8 {
+        let shift = 8 * byte;
+        if (varying >> shift) & 0xff == 0 {
+            continue;
+        }
+        let mut count = [0usize; 257];
+        for &(k, _) in v.iter() {
+            count[((k >> shift) & 0xff) as usize + 1] += 1;
+        }
+        for i in 0..256 {
+            count[i + 1] += count[i];
+        }
+        for &x in v.iter() {
+            let b = ((x.0 >> shift) & 0xff) as usize;
+            tmp[count[b]] = x;
+            count[b] += 1;
+        }
+        std::mem::swap(v, &mut tmp);
     }
 }
 
@@ -206,29 +296,80 @@ fn plane(pts: &[[f32; 3]], nbrs: &[(f32, u32)], w: Option<&[f64]>) -> Option<([f
         c[5] += wj * d[2] * d[2];
     }
     let mat = Matrix3::new(c[0], c[1], c[2], c[1], c[3], c[4], c[2], c[4], c[5]);
-    let e = SymmetricEigen::new(mat);
-    let mut order = [0usize, 1, 2];
-    order.sort_by(|&a, &b| e.eigenvalues[a].total_cmp(&e.eigenvalues[b]));
-    let (lo, mid, hi) = (
-        e.eigenvalues[order[0]],
-        e.eigenvalues[order[1]],
-        e.eigenvalues[order[2]],
-    );
-    // A line or a point has no plane: the two smallest variances are both ~0.
-    if mid.is_nan() || mid <= 1e-10 * hi || !lo.is_finite() {
+    let v = least_eigenvector(&mat)?;
+    Some((m, [v[0] as f32, v[1] as f32, v[2] as f32]))
+}
+
+/// Unit eigenvector of the smallest eigenvalue of a symmetric positive semi-definite 3×3
+/// matrix, in closed form: eigenvalues by the trigonometric solution of the characteristic
+/// cubic (Smith 1961), the vector as the largest cross product of two rows of `A − λ₃I`.
+/// `None` when the two smallest eigenvalues are both ~0 relative to the largest (a line or a
+/// point: no plane).
+pub fn least_eigenvector(a: &Matrix3<f64>) -> Option<Vector3<f64>> {
+    let p1 = a[(0, 1)] * a[(0, 1)] + a[(0, 2)] * a[(0, 2)] + a[(1, 2)] * a[(1, 2)];
+    let q = a.trace() / 3.0;
+    let p2 = (a[(0, 0)] - q).powi(2) + (a[(1, 1)] - q).powi(2) + (a[(2, 2)] - q).powi(2) + 2.0 * p1;
+    let p = (p2 / 6.0).sqrt();
+    if p.is_nan() || p == 0.0 {
         return None;
     }
-    let v: Vector3<f64> = e.eigenvectors.column(order[0]).into();
-    let l = v.norm();
+    let b = (a - Matrix3::identity() * q) / p;
+    let r = (b.determinant() / 2.0).clamp(-1.0, 1.0);
+    let phi = r.acos() / 3.0;
+    let hi = q + 2.0 * p * phi.cos();
+    let lo = q + 2.0 * p * (phi + 2.0 * std::f64::consts::FRAC_PI_3).cos();
+    let mid = 3.0 * q - hi - lo;
+    // (The trigonometric solution is accurate to ~1e-8 of the largest eigenvalue near repeated
+    // roots, so "~0" is taken as below 1e-6 of it.)
+    if mid.is_nan() || mid <= 1e-6 * hi || !lo.is_finite() {
+        return None;
+    }
+    let m = a - Matrix3::identity() * lo;
+    let (r0, r1, r2) = (
+        m.row(0).transpose(),
+        m.row(1).transpose(),
+        m.row(2).transpose(),
+    );
+    let cands = [r0.cross(&r1), r0.cross(&r2), r1.cross(&r2)];
+    let best = cands
+        .iter()
+        .max_by(|x, y| x.norm_squared().total_cmp(&y.norm_squared()))?;
+    let l = best.norm();
     if l.is_nan() || l <= 0.0 {
         return None;
     }
-    Some((m, [(v[0] / l) as f32, (v[1] / l) as f32, (v[2] / l) as f32]))
+    Some(best / l)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn closed_form_eigenvector_matches_nalgebra() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(3);
+        for _ in 0..2000 {
+            // Random covariances of flattened point clouds.
+            let g = Matrix3::from_fn(|_, _| rng.random::<f64>() - 0.5);
+            let d = Matrix3::from_diagonal(&Vector3::new(
+                rng.random::<f64>() + 0.1,
+                rng.random::<f64>() + 0.1,
+                rng.random::<f64>() * 0.05,
+            ));
+            let a = g * d * g.transpose();
+            let e = nalgebra::SymmetricEigen::new(a);
+            let i = e.eigenvalues.imin();
+            let want: Vector3<f64> = e.eigenvectors.column(i).into();
+            let got = least_eigenvector(&a).unwrap();
+            assert!(got.dot(&want).abs() > 1.0 - 1e-6, "{a} {got} {want}");
+        }
+        // Diagonal and degenerate cases.
+        let a = Matrix3::from_diagonal(&Vector3::new(2.0, 1.0, 0.0));
+        assert!((least_eigenvector(&a).unwrap()[2].abs() - 1.0).abs() < 1e-12);
+        assert!(least_eigenvector(&Matrix3::from_diagonal(&Vector3::new(1.0, 0.0, 0.0))).is_none());
+        assert!(least_eigenvector(&Matrix3::zeros()).is_none());
+    }
 
     #[test]
     fn grid_knn_equals_brute_force() {
@@ -245,7 +386,9 @@ mod tests {
         let queries: Vec<u32> = (0..pts.len() as u32).step_by(37).collect();
         for k in [1, 7, 20, 64] {
             let mut answers = Vec::new();
-            knn_all(&pts, &queries, k, |q, l| answers.push((q, l.to_vec())));
+            knn_all(&pts, &queries, k, None, |q, l| {
+                answers.push((q, l.to_vec()))
+            });
             assert_eq!(answers.len(), queries.len());
             for (qi, got) in answers {
                 let q = &pts[qi as usize];
@@ -260,7 +403,7 @@ mod tests {
             }
         }
         // The far points too.
-        knn_all(&pts, &[3000], 5, |_, l| assert_eq!(l[0], (0.0, 3000)));
+        knn_all(&pts, &[3000], 5, None, |_, l| assert_eq!(l[0], (0.0, 3000)));
     }
 
     #[test]
@@ -274,7 +417,7 @@ mod tests {
             }
         }
         let mut nb = Vec::new();
-        knn_all(&pts, &[55], 20, |_, l| nb = l.to_vec());
+        knn_all(&pts, &[55], 20, None, |_, l| nb = l.to_vec());
         assert_eq!(nb.len(), 20);
         assert_eq!(nb[0].1, 55);
         let want = {

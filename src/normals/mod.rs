@@ -465,6 +465,8 @@ struct Halo {
 
 /// A cell after fitting with its own points only.
 struct First {
+    /// Typical k-th neighbour distance in the cell.
+    typical: f32,
     centre: [f64; 3],
     rel: Vec<[f32; 3]>,
     normals: Vec<Option<[f32; 3]>>,
@@ -484,7 +486,7 @@ fn first_pass(pts: &CellPts, bx: &Aabb, params: &NormalParams) -> First {
     let mut boundary = Vec::new();
     let mut h = 0f64;
     let all: Vec<u32> = (0..n as u32).collect();
-    estimate::knn_all(&rel, &all, params.k, |i, nb| {
+    let typical = estimate::knn_all(&rel, &all, params.k, None, |i, nb| {
         let i = i as usize;
         let p = pts.pos[i];
         let b = (0..3)
@@ -504,6 +506,7 @@ fn first_pass(pts: &CellPts, bx: &Aabb, params: &NormalParams) -> First {
         keep_nbrs(&mut nbrs[i * ORIENT_K..(i + 1) * ORIENT_K], i as u32, nb, n);
     });
     First {
+        typical,
         centre,
         rel,
         normals,
@@ -542,7 +545,7 @@ fn second_pass(
         let mut all = f.rel.clone();
         all.extend_from_slice(&halo.pos);
         let (normals, nbrs) = (&mut f.normals, &mut f.nbrs);
-        estimate::knn_all(&all, &f.boundary, params.k, |i, nb| {
+        estimate::knn_all(&all, &f.boundary, params.k, Some(f.typical), |i, nb| {
             let iu = i as usize;
             normals[iu] = estimate::fit_normal(&all, nb, params.robust);
             keep_nbrs(&mut nbrs[iu * ORIENT_K..(iu + 1) * ORIENT_K], i, nb, n);

@@ -519,6 +519,8 @@ impl<'a> PointSource<'a> {
                     }
                 }
             }
+            out.lo = a;
+            out.hi = b;
             if !out.pos.is_empty() {
                 break;
             }
@@ -570,11 +572,13 @@ impl<'a> PointSource<'a> {
     }
 }
 
-/// Input points with their colours near a tile.
+/// Input points with their colours near a tile: those within `lo..hi`.
 #[derive(Default)]
 struct ColourPoints {
     pos: Vec<[f64; 3]>,
     col: Vec<[u16; 3]>,
+    lo: [f64; 3],
+    hi: [f64; 3],
 }
 
 /// Number of input points blended into a vertex's colour.
@@ -582,26 +586,52 @@ const COLOUR_NEIGHBOURS: usize = 4;
 
 impl ColourPoints {
     /// Colours of `vertices`: the inverse-distance blend of the [`COLOUR_NEIGHBOURS`] nearest
-    /// input points (weights `1/max(d, h/100)`, `h` the voxel size), the 16-bit channels taken
-    /// to 8 bits by rounding `v/257`. Grey where no coloured point was found.
-    fn colours(&self, vertices: &[[f64; 3]], h: f64) -> Vec<[u8; 3]> {
+    /// input points (weights `1/max(d, h/100)`, `h` the voxel size; ties by position), the 16-bit
+    /// channels taken to 8 bits by rounding `v/257`. Also returns the vertices whose answer is
+    /// not known to be exact: those whose farthest neighbour is farther than the faces of the
+    /// gathered box (a nearer point may lie outside it). Grey where no coloured point was found.
+    fn colours(&self, vertices: &[[f64; 3]], h: f64) -> (Vec<[u8; 3]>, Vec<(usize, f64)>) {
         if self.pos.is_empty() {
-            return vec![[128; 3]; vertices.len()];
+            return (vec![[128; 3]; vertices.len()], Vec::new());
         }
         let tree: kiddo::immutable::float::kdtree::ImmutableKdTree<f64, u32, 3, 32> =
             kiddo::immutable::float::kdtree::ImmutableKdTree::new_from_slice(&self.pos);
-        let k = std::num::NonZero::new(COLOUR_NEIGHBOURS.min(self.pos.len()))
+        // One more than needed, so that ties at the last place are seen and broken alike.
+        let k = std::num::NonZero::new((COLOUR_NEIGHBOURS + 2).min(self.pos.len()))
             .unwrap_or(std::num::NonZero::<usize>::MIN);
-        vertices
+        let mut inexact = Vec::new();
+        let colours = vertices
             .iter()
-            .map(|v| {
-                let mut nb = tree.nearest_n::<kiddo::SquaredEuclidean>(v, k);
-                nb.sort_by(|a, b| a.distance.total_cmp(&b.distance).then(a.item.cmp(&b.item)));
+            .enumerate()
+            .map(|(vi, v)| {
+                let mut nb: Vec<(f64, [f64; 3], [u16; 3])> = tree
+                    .nearest_n::<kiddo::SquaredEuclidean>(v, k)
+                    .iter()
+                    .map(|x| {
+                        (
+                            x.distance,
+                            self.pos[x.item as usize],
+                            self.col[x.item as usize],
+                        )
+                    })
+                    .collect();
+                nb.sort_by(|a, b| {
+                    a.0.total_cmp(&b.0)
+                        .then(a.1.partial_cmp(&b.1).unwrap_or(std::cmp::Ordering::Equal))
+                        .then(a.2.cmp(&b.2))
+                });
+                nb.truncate(COLOUR_NEIGHBOURS);
+                let far = nb.last().map_or(0.0, |x| x.0.sqrt());
+                let room = (0..3)
+                    .map(|a| (v[a] - self.lo[a]).min(self.hi[a] - v[a]))
+                    .fold(f64::INFINITY, f64::min);
+                if far >= room {
+                    inexact.push((vi, far));
+                }
                 let mut acc = [0f64; 3];
                 let mut sw = 0.0;
-                for x in &nb {
-                    let w = 1.0 / x.distance.sqrt().max(h * 0.01);
-                    let c = self.col[x.item as usize];
+                for (d2, _, c) in &nb {
+                    let w = 1.0 / d2.sqrt().max(h * 0.01);
                     for a in 0..3 {
                         acc[a] += w * c[a] as f64;
                     }
@@ -609,7 +639,8 @@ impl ColourPoints {
                 }
                 acc.map(|c| ((c / sw) / 257.0).round().clamp(0.0, 255.0) as u8)
             })
-            .collect()
+            .collect();
+        (colours, inexact)
     }
 }
 
@@ -1068,7 +1099,7 @@ pub fn reconstruct(
     }
     stage.finish(None);
     let with_color = m.attributes.color;
-    let mut colour_src = with_color.then_some(src);
+    let colour_src = with_color.then(|| std::sync::Mutex::new(src));
     let iso = if iso_count > 0 {
         iso_sum / iso_count as f64
     } else {
@@ -1131,8 +1162,11 @@ pub fn reconstruct(
                 colour_pts.push(None);
                 continue;
             }
-            colour_pts.push(match colour_src.as_mut() {
+            colour_pts.push(match colour_src.as_ref() {
                 Some(src) => {
+                    let mut src = src.lock().map_err(|_| {
+                        Error::Internal("the colour point source was poisoned".into())
+                    })?;
                     let a = plan.node_pos(*lo);
                     let b = plan.node_pos(lo.map(|v| v + plan.tile as i64));
                     Some(src.colour_points(a, b, plan.h * plan.e as f64 * 0.25)?)
@@ -1155,7 +1189,34 @@ pub fn reconstruct(
                     trim_mesh(&mut mesh, |c| support.near(c));
                 }
                 if let Some(cp) = cp {
-                    mesh.colors = cp.colours(&mesh.positions, plan.h);
+                    let (mut colors, inexact) = cp.colours(&mesh.positions, plan.h);
+                    // Vertices whose neighbours may lie beyond the gathered box: their true
+                    // neighbours lie within their current farthest one, so one wider gather
+                    // around them is exact. Rare (vertices far from every point).
+                    if let (false, Some(src)) = (inexact.is_empty(), colour_src.as_ref()) {
+                        let reach = inexact.iter().map(|x| x.1).fold(0.0, f64::max);
+                        let mut lo = [f64::INFINITY; 3];
+                        let mut hi = [f64::NEG_INFINITY; 3];
+                        let vs: Vec<[f64; 3]> =
+                            inexact.iter().map(|x| mesh.positions[x.0]).collect();
+                        for v in &vs {
+                            for a in 0..3 {
+                                lo[a] = lo[a].min(v[a]);
+                                hi[a] = hi[a].max(v[a]);
+                            }
+                        }
+                        let wide = src
+                            .lock()
+                            .map_err(|_| {
+                                Error::Internal("the colour point source was poisoned".into())
+                            })?
+                            .colour_points(lo, hi, reach * (1.0 + 1e-9) + plan.h * 1e-6)?;
+                        let (fixed, _) = wide.colours(&vs, plan.h);
+                        for ((vi, _), c) in inexact.iter().zip(fixed) {
+                            colors[*vi] = c;
+                        }
+                    }
+                    mesh.colors = colors;
                 }
                 write_tile(&tile_path(&tiles_dir, tt), &mesh)?;
                 Ok((tt, mesh))

@@ -91,6 +91,9 @@ fn vertex_colours_follow_the_input_points() {
         return;
     }
     let script = "import sys, plyfile\nd = plyfile.PlyData.read(sys.argv[1])\nv = d['vertex']\nprint([p.val_dtype for p in v.properties][3:])\nbad = 0\nfor x, y, z, r, g, b in zip(v['x'], v['y'], v['z'], v['red'], v['green'], v['blue']):\n    w = [(c * 0.5 + 0.5) * 255 for c in (x, y, z)]\n    bad += max(abs(w[0] - r), abs(w[1] - g), abs(w[2] - b)) > 12\nprint(len(v), bad)";
+    // The same coloured vertices for tiles of 32 and of the default size.
+    let digest = "import sys, plyfile, numpy as np, hashlib\nv = plyfile.PlyData.read(sys.argv[1])['vertex']\nrows = sorted(zip(*(v[p].tolist() for p in ('x', 'y', 'z', 'red', 'green', 'blue'))))\nprint(len(rows), hashlib.sha256(repr(rows).encode()).hexdigest())";
+    assert_eq!(py(digest, &a), py(digest, &b));
     for mesh in [&a, &b] {
         let out = py(script, mesh);
         let mut lines = out.lines();
@@ -135,6 +138,27 @@ fn autzen_lidar_gives_an_open_coloured_terrain() {
     // and faces looking up (the LAS is seen from the air).
     let script = "import sys, plyfile, numpy as np\nd = plyfile.PlyData.read(sys.argv[1])\nv = d['vertex']\nc = np.stack([v['red'], v['green'], v['blue']], 1)\nP = np.stack([v['x'], v['y'], v['z']], 1).astype(float)\nF = np.stack(d['face']['vertex_indices'])\nn = np.cross(P[F[:, 1]] - P[F[:, 0]], P[F[:, 2]] - P[F[:, 0]])\nprint(len(np.unique(c, axis=0)), int(c.max()), n[:, 2].sum() / np.linalg.norm(n, axis=1).sum())";
     let got = py(script, &out);
+    // Closed (no --trim), most vertices lie far from every point (under the terrain): their
+    // colours still do not depend on the tiles.
+    let digest = "import sys, plyfile, hashlib\nv = plyfile.PlyData.read(sys.argv[1])['vertex']\nrows = sorted(zip(*(v[p].tolist() for p in ('x', 'y', 'z', 'red', 'green', 'blue'))))\nprint(len(rows), hashlib.sha256(repr(rows).encode()).hexdigest())";
+    let closed: Vec<String> = ["16", "64"]
+        .iter()
+        .map(|t| {
+            let o = d.path().join(format!("closed{t}.ply"));
+            ok(&[
+                "reconstruct",
+                s(&las),
+                "--depth",
+                "7",
+                "--tile",
+                t,
+                "-o",
+                s(&o),
+            ]);
+            py(digest, &o)
+        })
+        .collect();
+    assert_eq!(closed[0], closed[1]);
     let v: Vec<f64> = got.split(' ').map(|x| x.parse().unwrap()).collect();
     assert!(v[0] >= 20.0, "{got}: distinct colours");
     assert!(v[1] > 150.0, "{got}: colours were not scaled to 8 bits");
