@@ -151,6 +151,10 @@ enum Cmd {
         /// points more closely.
         #[arg(long, default_value_t = 1.0)]
         smooth: f64,
+        /// Keep the vertices where marching cubes put them, instead of moving each onto the
+        /// plane of its nearest input points (by what exceeds the plane's standard error).
+        #[arg(long)]
+        no_fit: bool,
         /// Marching cubes on the GPU: auto (a discrete or integrated GPU when present), on
         /// (any Vulkan/Metal/DX12 adapter, software ones included), off. Off by default: with
         /// the field built on the CPU, the per-tile upload makes the GPU path slower end to end
@@ -347,6 +351,7 @@ fn run(cli: Cli) -> Result<()> {
             min_points,
             trim,
             smooth,
+            no_fit,
             gpu,
             normal,
             common,
@@ -372,6 +377,7 @@ fn run(cli: Cli) -> Result<()> {
             params.min_points = min_points;
             params.trim = trim;
             params.sigma_vox = smooth;
+            params.fit = !no_fit;
             params.gpu = gpu.parse()?;
             let st = reconstruct(
                 &ctx,

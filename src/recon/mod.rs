@@ -97,6 +97,8 @@ pub struct ReconParams {
     /// Marching cubes on the GPU: auto (a real GPU when there is one), on, off (the default:
     /// the GPU path is not yet faster end to end, see `extract::gpu`).
     pub gpu: crate::extract::gpu::GpuMode,
+    /// Move each vertex onto the plane of its nearest input points (see [`FIT_NEIGHBOURS`]).
+    pub fit: bool,
 }
 
 impl ReconParams {
@@ -105,6 +107,7 @@ impl ReconParams {
         ReconParams {
             depth,
             sigma_vox: 1.0,
+            fit: true,
             tile_voxels: None,
             work_dir,
             resume: false,
@@ -485,10 +488,10 @@ impl<'a> PointSource<'a> {
         Ok(c)
     }
 
-    /// The coloured points within `margin` of the box `lo..hi` (world), widening the margin
-    /// (doubling, up to 6 times) while none is found.
-    fn colour_points(&mut self, lo: [f64; 3], hi: [f64; 3], margin: f64) -> Result<ColourPoints> {
-        let mut out = ColourPoints::default();
+    /// The points (with their colours, when the store has them) within `margin` of the box
+    /// `lo..hi` (world), widening the margin (doubling, up to 6 times) while none is found.
+    fn near_points(&mut self, lo: [f64; 3], hi: [f64; 3], margin: f64) -> Result<NearPoints> {
+        let mut out = NearPoints::default();
         let lvl = self.plan.leaf_level;
         let side = 1i64 << lvl;
         let mut m = margin;
@@ -503,15 +506,12 @@ impl<'a> PointSource<'a> {
                         let k = CellKey::new(lvl, [x as u32, y as u32, z as u32]);
                         for si in self.covering(k) {
                             let sc = self.cell(si)?;
-                            if sc.col.is_empty() {
-                                continue;
-                            }
                             let (s0, e0) = sc.range(k);
                             for j in s0..e0 {
                                 let p = sc.pos[j];
                                 if (0..3).all(|q| p[q] >= a[q] && p[q] <= b[q]) {
                                     out.pos.push(p);
-                                    let c = sc.col[j];
+                                    let c = sc.col.get(j).copied().unwrap_or([0; 4]);
                                     out.col.push([c[0], c[1], c[2]]);
                                 }
                             }
@@ -572,9 +572,9 @@ impl<'a> PointSource<'a> {
     }
 }
 
-/// Input points with their colours near a tile: those within `lo..hi`.
+/// Input points near a tile (those within `lo..hi`), with their colours (zero without).
 #[derive(Default)]
-struct ColourPoints {
+struct NearPoints {
     pos: Vec<[f64; 3]>,
     col: Vec<[u16; 3]>,
     lo: [f64; 3],
@@ -584,23 +584,60 @@ struct ColourPoints {
 /// Number of input points blended into a vertex's colour.
 const COLOUR_NEIGHBOURS: usize = 4;
 
-impl ColourPoints {
-    /// Colours of `vertices`: the inverse-distance blend of the [`COLOUR_NEIGHBOURS`] nearest
-    /// input points (weights `1/max(d, h/100)`, `h` the voxel size; ties by position), the 16-bit
-    /// channels taken to 8 bits by rounding `v/257`. Also returns the vertices whose answer is
-    /// not known to be exact: those whose farthest neighbour is farther than the faces of the
-    /// gathered box (a nearer point may lie outside it). Grey where no coloured point was found.
-    fn colours(&self, vertices: &[[f64; 3]], h: f64) -> (Vec<[u8; 3]>, Vec<(usize, f64)>) {
+/// Input points whose plane a vertex is moved onto (`fit`).
+pub const FIT_NEIGHBOURS: usize = 20;
+
+/// What the input points say about one vertex.
+struct VertexFit {
+    pos: [f64; 3],
+    color: [u8; 3],
+    /// Farthest neighbour used: the answer is exact when the gathered box reaches beyond it.
+    reach: f64,
+}
+
+impl NearPoints {
+    /// For each vertex: its position moved onto the plane of its [`FIT_NEIGHBOURS`] nearest
+    /// input points (when `fit`), and its colour, the inverse-distance blend (weights
+    /// `1/max(d, h/100)`) of its [`COLOUR_NEIGHBOURS`] nearest points, 16-bit channels to 8
+    /// bits by rounding `v/257`. Neighbours are ordered by distance, then position, then
+    /// colour, so the answer depends only on the point set. Also returns the vertices whose
+    /// answer may not be exact: their farthest neighbour lies beyond the gathered box's faces.
+    ///
+    /// The fit is a one-step moving-least-squares projection (Alexa et al. 2003, §3): the
+    /// plane through the neighbours' mean with their least-variance normal. It moves a vertex
+    /// only where its nearest point is within two voxels, by at most two voxels, and only by
+    /// what exceeds twice the standard error of the plane's offset (`√λ₀ / k`), so on noisy
+    /// points the smooth Poisson surface is kept and on precise ones the surface follows them
+    /// as a screened solve would (Kazhdan & Hoppe 2013).
+    fn fit_vertices(
+        &self,
+        vertices: &[[f64; 3]],
+        h: f64,
+        fit: bool,
+    ) -> (Vec<VertexFit>, Vec<usize>) {
         if self.pos.is_empty() {
-            return (vec![[128; 3]; vertices.len()], Vec::new());
+            let out = vertices
+                .iter()
+                .map(|v| VertexFit {
+                    pos: *v,
+                    color: [128; 3],
+                    reach: 0.0,
+                })
+                .collect();
+            return (out, Vec::new());
         }
         let tree: kiddo::immutable::float::kdtree::ImmutableKdTree<f64, u32, 3, 32> =
             kiddo::immutable::float::kdtree::ImmutableKdTree::new_from_slice(&self.pos);
-        // One more than needed, so that ties at the last place are seen and broken alike.
-        let k = std::num::NonZero::new((COLOUR_NEIGHBOURS + 2).min(self.pos.len()))
+        let want = if fit {
+            FIT_NEIGHBOURS
+        } else {
+            COLOUR_NEIGHBOURS
+        };
+        // Two more than needed, so that ties at the last place are seen and broken alike.
+        let k = std::num::NonZero::new((want + 2).min(self.pos.len()))
             .unwrap_or(std::num::NonZero::<usize>::MIN);
         let mut inexact = Vec::new();
-        let colours = vertices
+        let out = vertices
             .iter()
             .enumerate()
             .map(|(vi, v)| {
@@ -620,28 +657,64 @@ impl ColourPoints {
                         .then(a.1.partial_cmp(&b.1).unwrap_or(std::cmp::Ordering::Equal))
                         .then(a.2.cmp(&b.2))
                 });
-                nb.truncate(COLOUR_NEIGHBOURS);
-                let far = nb.last().map_or(0.0, |x| x.0.sqrt());
+                nb.truncate(want);
+                let reach = nb.last().map_or(0.0, |x| x.0.sqrt());
                 let room = (0..3)
                     .map(|a| (v[a] - self.lo[a]).min(self.hi[a] - v[a]))
                     .fold(f64::INFINITY, f64::min);
-                if far >= room {
-                    inexact.push((vi, far));
+                if reach >= room {
+                    inexact.push(vi);
                 }
                 let mut acc = [0f64; 3];
                 let mut sw = 0.0;
-                for (d2, _, c) in &nb {
+                for (d2, _, c) in nb.iter().take(COLOUR_NEIGHBOURS) {
                     let w = 1.0 / d2.sqrt().max(h * 0.01);
                     for a in 0..3 {
                         acc[a] += w * c[a] as f64;
                     }
                     sw += w;
                 }
-                acc.map(|c| ((c / sw) / 257.0).round().clamp(0.0, 255.0) as u8)
+                let color = acc.map(|c| ((c / sw) / 257.0).round().clamp(0.0, 255.0) as u8);
+                let pos = if fit { project(*v, &nb, h) } else { *v };
+                VertexFit { pos, color, reach }
             })
             .collect();
-        (colours, inexact)
+        (out, inexact)
     }
+}
+
+/// `v` moved onto the plane of its neighbours `nb` (see [`NearPoints::fit_vertices`]).
+fn project(v: [f64; 3], nb: &[(f64, [f64; 3], [u16; 3])], h: f64) -> [f64; 3] {
+    if nb.len() < 3 || nb[0].0 > 4.0 * h * h {
+        return v;
+    }
+    let n = nb.len() as f64;
+    let mut c = [0f64; 3];
+    for (_, p, _) in nb {
+        for a in 0..3 {
+            c[a] += p[a] / n;
+        }
+    }
+    let mut m = nalgebra::Matrix3::<f64>::zeros();
+    for (_, p, _) in nb {
+        let d = nalgebra::Vector3::new(p[0] - c[0], p[1] - c[1], p[2] - c[2]);
+        m += d * d.transpose();
+    }
+    let e = m.symmetric_eigen();
+    let i = e.eigenvalues.imin();
+    let nrm = e.eigenvectors.column(i);
+    let off = (v[0] - c[0]) * nrm[0] + (v[1] - c[1]) * nrm[1] + (v[2] - c[2]) * nrm[2];
+    let se = e.eigenvalues[i].max(0.0).sqrt() / n;
+    if off.abs() > 2.0 * h {
+        return v;
+    }
+    // Shrunk toward zero by how much of it the plane's error could explain.
+    let step = if off == 0.0 {
+        0.0
+    } else {
+        off * (1.0 - (2.0 * se / off).powi(2)).max(0.0)
+    };
+    [0, 1, 2].map(|a| v[a] - step * nrm[a])
 }
 
 #[derive(Default)]
@@ -894,6 +967,8 @@ fn read_tile(path: &Path) -> Result<TileMesh> {
 struct RunInfo {
     scanflow: String,
     trim: bool,
+    #[serde(default)]
+    fit: bool,
     error: f64,
     min_points: u64,
     store_points: u64,
@@ -934,6 +1009,7 @@ pub fn reconstruct(
     let info = RunInfo {
         scanflow: env!("CARGO_PKG_VERSION").into(),
         trim: params.trim,
+        fit: params.fit,
         error: params.error,
         min_points: params.min_points,
         store_points: m.point_count,
@@ -1099,7 +1175,7 @@ pub fn reconstruct(
     }
     stage.finish(None);
     let with_color = m.attributes.color;
-    let colour_src = with_color.then(|| std::sync::Mutex::new(src));
+    let near_src = (with_color || params.fit).then(|| std::sync::Mutex::new(src));
     let iso = if iso_count > 0 {
         iso_sum / iso_count as f64
     } else {
@@ -1155,21 +1231,21 @@ pub fn reconstruct(
         }
         detail_cache.fit(2 * wave_tiles.iter().map(|w| w.2.len()).sum::<usize>());
         let mut loaded = Vec::with_capacity(wave_tiles.len());
-        let mut colour_pts: Vec<Option<ColourPoints>> = Vec::with_capacity(wave_tiles.len());
+        let mut colour_pts: Vec<Option<NearPoints>> = Vec::with_capacity(wave_tiles.len());
         for (tt, lo, near) in &wave_tiles {
             if params.resume && tile_path(&tiles_dir, *tt).exists() {
                 loaded.push((*tt, *lo, None));
                 colour_pts.push(None);
                 continue;
             }
-            colour_pts.push(match colour_src.as_ref() {
+            colour_pts.push(match near_src.as_ref() {
                 Some(src) => {
                     let mut src = src.lock().map_err(|_| {
                         Error::Internal("the colour point source was poisoned".into())
                     })?;
                     let a = plan.node_pos(*lo);
                     let b = plan.node_pos(lo.map(|v| v + plan.tile as i64));
-                    Some(src.colour_points(a, b, plan.h * plan.e as f64 * 0.25)?)
+                    Some(src.near_points(a, b, plan.h * plan.e as f64 * 0.25)?)
                 }
                 None => None,
             });
@@ -1184,21 +1260,21 @@ pub fn reconstruct(
             .acquire(loaded.len() as u64 * tile_nodes * 12, "a wave of tiles")?;
         let dims = [(plan.tile + 1) as usize; 3];
         let finish =
-            |tt: u64, mut mesh: TileMesh, cp: &Option<ColourPoints>| -> Result<(u64, TileMesh)> {
+            |tt: u64, mut mesh: TileMesh, cp: &Option<NearPoints>| -> Result<(u64, TileMesh)> {
                 if params.trim {
                     trim_mesh(&mut mesh, |c| support.near(c));
                 }
                 if let Some(cp) = cp {
-                    let (mut colors, inexact) = cp.colours(&mesh.positions, plan.h);
+                    let (mut fits, inexact) = cp.fit_vertices(&mesh.positions, plan.h, params.fit);
                     // Vertices whose neighbours may lie beyond the gathered box: their true
                     // neighbours lie within their current farthest one, so one wider gather
-                    // around them is exact. Rare (vertices far from every point).
-                    if let (false, Some(src)) = (inexact.is_empty(), colour_src.as_ref()) {
-                        let reach = inexact.iter().map(|x| x.1).fold(0.0, f64::max);
+                    // around them is exact (rare: vertices far from every point).
+                    if let (false, Some(src)) = (inexact.is_empty(), near_src.as_ref()) {
+                        let reach = inexact.iter().map(|&i| fits[i].reach).fold(0.0, f64::max);
                         let mut lo = [f64::INFINITY; 3];
                         let mut hi = [f64::NEG_INFINITY; 3];
                         let vs: Vec<[f64; 3]> =
-                            inexact.iter().map(|x| mesh.positions[x.0]).collect();
+                            inexact.iter().map(|&i| mesh.positions[i]).collect();
                         for v in &vs {
                             for a in 0..3 {
                                 lo[a] = lo[a].min(v[a]);
@@ -1207,16 +1283,19 @@ pub fn reconstruct(
                         }
                         let wide = src
                             .lock()
-                            .map_err(|_| {
-                                Error::Internal("the colour point source was poisoned".into())
-                            })?
-                            .colour_points(lo, hi, reach * (1.0 + 1e-9) + plan.h * 1e-6)?;
-                        let (fixed, _) = wide.colours(&vs, plan.h);
-                        for ((vi, _), c) in inexact.iter().zip(fixed) {
-                            colors[*vi] = c;
+                            .map_err(|_| Error::Internal("the point source was poisoned".into()))?
+                            .near_points(lo, hi, reach * (1.0 + 1e-9) + plan.h * 1e-6)?;
+                        let (fixed, _) = wide.fit_vertices(&vs, plan.h, params.fit);
+                        for (&vi, f) in inexact.iter().zip(fixed) {
+                            fits[vi] = f;
                         }
                     }
-                    mesh.colors = colors;
+                    for (p, f) in mesh.positions.iter_mut().zip(&fits) {
+                        *p = f.pos;
+                    }
+                    if with_color {
+                        mesh.colors = fits.iter().map(|f| f.color).collect();
+                    }
                 }
                 write_tile(&tile_path(&tiles_dir, tt), &mesh)?;
                 Ok((tt, mesh))
@@ -1599,4 +1678,39 @@ pub fn global_solve(
     let mut mesh = TileMesh::default();
     marching_cubes(&block, [m; 3], [0; 3], iso as f32, &geom, &mut mesh);
     mesh
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn projection_follows_precise_points_and_ignores_noise() {
+        let h = 0.01;
+        // Precise points on z = 0: a vertex 0.3 voxel above moves onto the plane.
+        let mut nb: Vec<(f64, [f64; 3], [u16; 3])> = Vec::new();
+        for i in 0..5 {
+            for j in 0..4 {
+                let p = [i as f64 * 0.004 - 0.008, j as f64 * 0.004 - 0.006, 0.0];
+                nb.push((p[0] * p[0] + p[1] * p[1], p, [0; 3]));
+            }
+        }
+        nb.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let v = project([0.0, 0.0, 0.003], &nb, h);
+        assert!(v[2].abs() < 1e-9, "{v:?}");
+        // Too far from every point (more than two voxels): left alone.
+        let far: Vec<_> = nb.iter().map(|x| (x.0 + 1.0, x.1, x.2)).collect();
+        assert_eq!(project([0.0, 0.0, 0.003], &far, h), [0.0, 0.0, 0.003]);
+        // Noisy points: an offset within the plane's error is not followed.
+        let noisy: Vec<_> = nb
+            .iter()
+            .enumerate()
+            .map(|(i, x)| {
+                let z = if i % 2 == 0 { 0.004 } else { -0.004 };
+                (x.0, [x.1[0], x.1[1], z], x.2)
+            })
+            .collect();
+        let v = project([0.0, 0.0, 0.0015], &noisy, h);
+        assert!(v[2] > 0.0015 * 0.5, "{v:?}");
+    }
 }

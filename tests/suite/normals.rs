@@ -295,5 +295,7 @@ fn raw_bunny_scans_give_one_closed_surface() {
     let c = rep.comparison.as_ref().unwrap();
     let mean = c.absolute.to_reference.mean;
     let back = c.absolute.from_reference.mean;
-    assert!(mean < 4e-4 && back < 4e-4, "{rep}");
+    // With vertices fitted to the points (the default), as close as a screened solve; the
+    // smooth Poisson surface alone is about twice as far (1.7e-4, 1.4e-4).
+    assert!(mean < 1.2e-4 && back < 7e-5, "{rep}");
 }
