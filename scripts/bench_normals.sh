@@ -1,44 +1,134 @@
 #!/usr/bin/env bash
-# Normal estimation throughput: scanflow (k = 20, plane fits and orientation, out of core)
-# against Open3D's estimate_normals (KNN 20, no orientation) and
-# orient_normals_consistent_tangent_plane on the same points, same machine, same run.
-# Target: >= 1 M points/s on a 2-core machine.
+# Normal estimation throughput: scanflow against Open3D on the same points, same machine, same run.
+#
+# What it measures (issue 5): POINTS samples of the bumpy sphere (scanflow synth, noise 0.001),
+# written once with their exact normals (b.ply) and once as bare x y z (b_nonormals.ply). Timed:
+#   scanflow ingest b_nonormals.ply --normals estimate   (k = 20 plane fits + orientation, out of
+#                                                          core); the figure is the one scanflow
+#                                                          prints ("estimated normals for N points
+#                                                          in S s"), else the difference below
+#   scanflow ingest b.ply --normals use                  (the same ingest without estimation: the
+#                                                          baseline for that difference)
+#   Open3D estimate_normals(KDTreeSearchParamKNN(20))    (fit only; input order and Morton-sorted)
+#   Open3D orient_normals_consistent_tangent_plane(20)   (ORIENT=auto: when memory allows,
+#                                                          ~2.6 KB/point; minutes at 2M points)
+# with THREADS threads for both (scanflow --threads, OMP_NUM_THREADS for Open3D), and points/s
+# and ratios printed. The store is read back and both tools' normals are compared with the exact
+# ones (angle, inward fraction).
+# Target: scanflow >= 1 M points/s on this 2-core machine. The script fails only when something
+# does not run; it prints "target met" / "target not met".
+#
 # usage: scripts/bench_normals.sh [POINTS=2000000]
+#   THREADS=2  K=20  ORIENT=auto|1|0
+#   REPEAT=3       best of REPEAT timings for scanflow and for Open3D's estimate_normals (sorted)
+#   BUILD=0        use the existing target/release/scanflow (default: cargo build --release first)
+#   SCANFLOW=PATH  binary to measure (implies BUILD=0)
+#   KEEP=DIR       keep the points, stores and logs in DIR
 set -euo pipefail
 cd "$(dirname "$0")/.."
-n="${1:-2000000}"
-python3 -m pip install --quiet --disable-pip-version-check open3d plyfile numpy
-python3 -c "import open3d" 2>/dev/null || { apt-get install -y -qq libusb-1.0-0 libgomp1 >/dev/null; }
-cargo build --release --quiet
-tmp="$(mktemp -d)"
-trap 'rm -rf "$tmp"' EXIT
-target/release/scanflow synth bumpy --points "$n" --noise 0.001 -o "$tmp/b.ply" --progress none >/dev/null
-python3 - "$tmp/b.ply" "$tmp/bare.ply" <<'PY'
-import sys, numpy as np, plyfile
-v = plyfile.PlyData.read(sys.argv[1])["vertex"]
-a = np.empty(len(v), dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4")])
-for c in "xyz":
-    a[c] = v[c]
-plyfile.PlyData([plyfile.PlyElement.describe(a, "vertex")]).write(sys.argv[2])
-PY
-out=$(target/release/scanflow ingest "$tmp/bare.ply" -o "$tmp/store" --normals estimate --progress none)
-echo "$out"
-ours=$(echo "$out" | sed -n 's/^estimated normals for \([0-9]*\) points in \([0-9.]*\) s.*/\2/p')
-python3 - "$tmp/bare.ply" "$n" "$ours" <<'PY'
-import sys, time, numpy as np, open3d as o3d, plyfile
-v = plyfile.PlyData.read(sys.argv[1])["vertex"]
-n, ours = int(sys.argv[2]), float(sys.argv[3])
-pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.stack([v[c] for c in "xyz"], 1).astype(float)))
-t0 = time.time()
-pc.estimate_normals(o3d.geometry.KDTreeSearchParamKNN(20))
-est = time.time() - t0
-t0 = time.time()
-pc.orient_normals_consistent_tangent_plane(20)
-ori = time.time() - t0
-print(f"{n} points, k = 20")
-print(f"scanflow (fit + orient, out of core): {ours:.2f} s = {n / ours / 1e6:.2f} M points/s")
-print(f"open3d estimate_normals:               {est:.2f} s = {n / est / 1e6:.2f} M points/s")
-print(f"open3d + orient_consistent_tangent:    {est + ori:.2f} s = {n / (est + ori) / 1e6:.2f} M points/s")
-print(f"ratio scanflow/open3d time: {ours / est:.2f} (estimate only), {ours / (est + ori):.3f} (with orientation)")
-print("target >= 1 M points/s:", "met" if n / ours >= 1e6 else "not met")
-PY
+export PYTHONDONTWRITEBYTECODE=1   # no __pycache__ in scripts/
+N=${1:-2000000}
+THREADS=${THREADS:-2}
+[[ $N =~ ^[0-9]+$ ]] || { echo "usage: $0 [POINTS]" >&2; exit 2; }
+K=${K:-20}
+REPEAT=${REPEAT:-3}
+ORIENT=${ORIENT:-auto}
+
+# --- Python side: Open3D, numpy (zstandard optional: the zstd command reads the store too)
+if ! python3 -c "import open3d, numpy" 2>/dev/null; then
+  python3 -m pip install --quiet --disable-pip-version-check open3d numpy || {
+    echo "pip could not install open3d numpy (no index reachable? Python $(python3 -V 2>&1))" >&2; exit 1; }
+  if ! python3 -c "import open3d" 2>/dev/null && command -v apt-get >/dev/null; then
+    apt-get install -y -qq libgomp1 libusb-1.0-0 >/dev/null 2>&1 || true   # Open3D's shared-library deps
+  fi
+  python3 -c "import open3d" || { echo "open3d does not import" >&2; exit 1; }
+fi
+python3 -c "import zstandard" 2>/dev/null || command -v zstd >/dev/null ||
+  python3 -m pip install --quiet --disable-pip-version-check zstandard || true
+
+# --- scanflow
+if [ -n "${SCANFLOW:-}" ]; then BIN=$SCANFLOW
+else
+  BIN=$PWD/target/release/scanflow
+  [ "${BUILD:-1}" = 0 ] || cargo build --release --quiet
+fi
+[ -x "$BIN" ] || { echo "no scanflow binary at $BIN" >&2; exit 1; }
+"$BIN" ingest --help | grep -q -- '--normals' || {
+  echo "$BIN ingest has no --normals (normal estimation): too old" >&2; exit 1; }
+
+if [ -n "${KEEP:-}" ]; then TMP=$KEEP; mkdir -p "$TMP"; rm -rf "$TMP/store" "$TMP/store_plain"
+else TMP=$(mktemp -d -t scanflow-normals-XXXX); trap 'rm -rf "$TMP"' EXIT; fi
+
+# run LABEL CMD...: "wall_s peak_KiB user_s sys_s" into $TMP/LABEL.time, stdout to $TMP/LABEL.out,
+# stderr to $TMP/LABEL.log
+run() {
+  local label=$1; shift
+  local t0 t1 rc=0
+  if [ -x /usr/bin/time ]; then
+    /usr/bin/time -f "%e %M %U %S" -o "$TMP/$label.time" "$@" > "$TMP/$label.out" 2> "$TMP/$label.log" || rc=$?
+  else
+    t0=$(date +%s.%N); "$@" > "$TMP/$label.out" 2> "$TMP/$label.log" || rc=$?; t1=$(date +%s.%N)
+    echo "$(echo "$t1 - $t0" | bc -l) - - -" > "$TMP/$label.time"
+  fi
+  if [ "$rc" != 0 ]; then
+    echo "$label failed (exit $rc): $*" >&2; tail -n 20 "$TMP/$label.log" "$TMP/$label.out" >&2; exit 1
+  fi
+}
+field() { awk -v i="$2" '{print $i}' "$TMP/$1.time"; }
+mib() { local k; k=$(field "$1" 2); [ "$k" = - ] && echo "?" || echo $((k / 1024)); }
+
+echo "$N points (bumpy sphere, noise 0.001), k = $K, $THREADS threads, $(nproc) cores; scratch $TMP"
+echo "load average before: $(cut -d' ' -f1-3 /proc/loadavg 2>/dev/null || echo ?) (a busy machine slows both sides)"
+if [ ! -f "$TMP/b.ply" ] || [ ! -f "$TMP/b_nonormals.ply" ]; then
+  "$BIN" synth bumpy --points "$N" --noise 0.001 -o "$TMP/b.ply" --progress none > /dev/null
+  python3 -c 'import sys; sys.path.insert(0, "scripts")
+from normals_peer import read_ply_vertices, write_xyz_ply
+write_xyz_ply(sys.argv[2], read_ply_vertices(sys.argv[1]))' "$TMP/b.ply" "$TMP/b_nonormals.ply"
+fi
+cat "$TMP/b.ply" "$TMP/b_nonormals.ply" > /dev/null   # warm page cache
+
+run plain "$BIN" ingest "$TMP/b.ply" -o "$TMP/store_plain" --normals use --threads "$THREADS" --progress none
+# best of REPEAT runs (a shared machine is noisy); the figure parsed from the last line like
+# "estimated normals for N points in S s (X M points/s ...)", defensively
+best_s="" best_wall="" best_i=1
+for i in $(seq "$REPEAT"); do
+  rm -rf "$TMP/store"
+  run "ours$i" "$BIN" ingest "$TMP/b_nonormals.ply" -o "$TMP/store" --normals estimate --neighbours "$K" \
+    --threads "$THREADS" --progress json
+  s_i=$(sed -n 's/.*estimated normals for \([0-9][0-9]*\) points in \([0-9.][0-9.]*\) *s.*/\2/p' "$TMP/ours$i.out" | tail -n 1)
+  w_i=$(field "ours$i" 1)
+  if [ -z "$best_wall" ] || awk -v a="${s_i:-$w_i}" -v b="${best_s:-$best_wall}" 'BEGIN{exit !(a < b)}'; then
+    best_s=$s_i best_wall=$w_i best_i=$i
+  fi
+  all_runs="${all_runs:-}${all_runs:+, }${s_i:-?} s (whole ingest $w_i s)"
+done
+cp "$TMP/ours$best_i.time" "$TMP/ours.time"; cp "$TMP/ours$best_i.out" "$TMP/ours.out"
+ours_s=$best_s
+echo "scanflow normals, each run: $all_runs"
+echo "scanflow ingest --normals estimate said (best of $REPEAT):"
+sed 's/^/  /' "$TMP/ours.out"
+[ -n "$ours_s" ] || echo "  (no 'estimated normals for N points in S s' line: using whole-ingest minus plain ingest)"
+echo "  whole ingest $(field ours 1) s, peak RSS $(mib ours) MiB, CPU $(field ours 3) s user + $(field ours 4) s sys;" \
+  "plain ingest (--normals use) $(field plain 1) s"
+
+case "$ORIENT" in
+  auto) avail_kib=$(awk '/MemAvailable/ {print $2}' /proc/meminfo 2>/dev/null || echo 0)
+        if [ "$avail_kib" -gt $((N * 4)) ]; then ORIENT=1; else ORIENT=0
+          echo "open3d orientation skipped: $((avail_kib / 1024)) MiB available, wants ~$((N * 4 / 1024)) MiB"; fi ;;
+esac
+peer_args=(--neighbours "$K" --repeat "$REPEAT" --store "$TMP/store" --ours-ingest-seconds "$(field ours 1)"
+           --plain-ingest-seconds "$(field plain 1)")
+[ -z "$ours_s" ] || peer_args+=(--ours-seconds "$ours_s")
+[ "$ORIENT" = 0 ] || peer_args+=(--orient)
+echo "running open3d ..."
+echo
+export OMP_NUM_THREADS=$THREADS
+run peer python3 scripts/normals_peer.py "$TMP/b_nonormals.ply" "$TMP/b.ply" "${peer_args[@]}" --json "$TMP/normals_figures.json"
+cat "$TMP/peer.out"
+echo "open3d process: $(field peer 1) s wall, peak RSS $(mib peer) MiB (python, numpy copies and all)"
+echo
+echo "fairness: same points and k, same thread count. scanflow's figure includes orienting the"
+echo "normals (MST propagation here: no viewpoint) and reading/writing its cells; Open3D's"
+echo "estimate_normals is the plane fit alone, in memory. Open3D is timed in the input order"
+echo "(random, as synth writes) and Morton-sorted; the ratio uses the faster."
+echo "load average after: $(cut -d' ' -f1-3 /proc/loadavg 2>/dev/null || echo ?)"

@@ -26,7 +26,9 @@ samples are the same points for every output):
   compare with. The same rule, with the same reference, for every output; the kept fraction is
   printed. (Unrestricted out->ref is printed too, for information.)
 - two-sided: the mean of the two directions' means (and RMS of both directions' samples pooled
-  equally). Target: ours two-sided mean <= the peer's. Per-direction ratios are printed too.
+  equally). Target: ours two-sided mean <= the peer's. Also printed: per-direction ratios,
+  whether RMS, p95 and max are no worse too, and ours' ref->out tail (reference samples farther
+  than 2e-3 x diagonal: how many, their share of the squared distance, their centroid).
 
 Also per output: vertices, triangles, connected components, closed (every edge in exactly two
 triangles), consistently oriented (every directed edge once), outward (positive volume).
@@ -147,6 +149,10 @@ def measure(ref, path, n):
     res = dict(ref_to_out=stats(r2o, ref.diag), out_to_ref=stats(o2r[keep], ref.diag),
                out_to_ref_all=stats(o2r, ref.diag), kept=float(keep.mean()))
     a, b = res["ref_to_out"], res["out_to_ref"]
+    far = r2o / ref.diag > 2e-3
+    res["worst"] = dict(n=int(far.sum()), share=float(far.mean()),
+                        sumsq=float((r2o[far] ** 2).sum() / max((r2o ** 2).sum(), 1e-300)),
+                        centroid=(rs[far].mean(0) if far.any() else np.full(3, np.nan)).tolist())
     res["two_sided"] = dict(mean=0.5 * (a["mean"] + b["mean"]),
                             rms=float(np.sqrt(0.5 * (a["rms"] ** 2 + b["rms"] ** 2))),
                             max=max(a["max"], b["max"]))
@@ -178,6 +184,8 @@ def main():
     ap.add_argument("--run", nargs="+", action="append", required=True,
                     metavar="LABEL MESH TIMEFILE [STAGES]")
     ap.add_argument("--samples", type=int, default=200_000)
+    ap.add_argument("--store", help="a store made by `scanflow ingest --conf CONF`: check that it holds "
+                                    "the very points posed here")
     ap.add_argument("--json", help="also write all figures here")
     a = ap.parse_args()
     if len(a.run) < 2 or any(len(r) not in (3, 4) for r in a.run):
@@ -193,6 +201,20 @@ def main():
         print(f"  p' = {k:10s} worst scan {worst:.2e}, all points {med:.2e}")
     if not al["R^T p + t"][0] < al["R p + t"][0]:
         print("WARNING: the conjugate rotation does not align the scans better than R itself")
+    if a.store:
+        from scipy.spatial import cKDTree
+        from normals_peer import read_store
+        rec, _ = read_store(a.store)
+        sp = np.stack([rec[c] for c in "xyz"], 1).astype(np.float64)
+        pts, scan, dirs = load_scans(a.conf)
+        d, _ = cKDTree(pts).query(sp)
+        line = (f"scanflow's store: {len(sp)} points (posed here: {len(pts)}), farthest from a point "
+                f"posed here {d.max() / ref.diag:.1e} of the diagonal")
+        if "nx" in rec.dtype.names and "scan" in rec.dtype.names:
+            n = np.stack([rec[c] for c in ("nx", "ny", "nz")], 1).astype(np.float64)
+            line += (f"; its normals facing their scanner: "
+                     f"{100 * (np.einsum('ij,ij->i', n, dirs[rec['scan']]) > 0).mean():.2f}%")
+        print(line)
 
     rows = []
     for r in a.run:
@@ -244,8 +266,21 @@ def main():
     o, p = ours["m"]["two_sided"]["mean"], rows[1]["m"]["two_sided"]["mean"]
     print(f"target (two-sided mean distance no worse than {rows[1]['label']}'s): "
           f"{'target met' if o <= p else 'target not met'} ({o:.3e} vs {p:.3e})")
-    both = all(ours["m"][k]["mean"] <= rows[1]["m"][k]["mean"] for k in ("ref_to_out", "out_to_ref"))
-    print(f"  each direction's mean no worse too: {'yes' if both else 'no'}")
+    om, pm = ours["m"], rows[1]["m"]
+    yes = lambda b: "yes" if b else "no"  # noqa: E731
+    print(f"  each direction's mean no worse too: "
+          f"{yes(all(om[k]['mean'] <= pm[k]['mean'] for k in ('ref_to_out', 'out_to_ref')))}; "
+          f"two-sided RMS no worse: {yes(om['two_sided']['rms'] <= pm['two_sided']['rms'])} "
+          f"({om['two_sided']['rms'] / pm['two_sided']['rms']:.2f}x); "
+          f"p95 no worse (both directions): "
+          f"{yes(all(om[k]['p95'] <= pm[k]['p95'] for k in ('ref_to_out', 'out_to_ref')))}; "
+          f"max no worse: {yes(om['two_sided']['max'] <= pm['two_sided']['max'])}")
+    # where the worst reference samples are, for ours: a pointer for whoever chases the tail
+    w = ours["m"]["worst"]
+    print(f"  {ours['label']}'s ref->out tail: {w['n']} reference samples ({100 * w['share']:.2f}%) farther than "
+          f"2e-3 x diagonal carry {100 * w['sumsq']:.0f}% of its squared distance; their centroid "
+          f"({w['centroid'][0]:.4f}, {w['centroid'][1]:.4f}, {w['centroid'][2]:.4f}), reference bounds "
+          f"y {ref.v[:, 1].min():.4f}..{ref.v[:, 1].max():.4f}")
     if a.json:
         with open(a.json, "w") as f:
             json.dump(dict(diag=ref.diag, alignment=al, runs=rows), f, indent=1, default=str)

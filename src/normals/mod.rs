@@ -628,15 +628,12 @@ fn write_side(path: &Path, normals: &[[f32; 3]], comp: &[u32]) -> Result<()> {
         }
         raw.extend_from_slice(&c.to_le_bytes());
     }
-    let z = zstd::bulk::compress(&raw, 1)
-        .map_err(|e| Error::Internal(format!("zstd compression failed: {e}")))?;
-    std::fs::write(path, z).with_path(path)
+    // Uncompressed: read once more shortly after, and 16 bytes a point.
+    std::fs::write(path, raw).with_path(path)
 }
 
 fn read_side(path: &Path, count: usize) -> Result<(Vec<[f32; 3]>, Vec<u32>)> {
-    let z = std::fs::read(path).with_path(path)?;
-    let raw = zstd::bulk::decompress(&z, count * 16)
-        .map_err(|e| Error::input(path, format!("corrupt normals side file: {e}")))?;
+    let raw = std::fs::read(path).with_path(path)?;
     if raw.len() != count * 16 {
         return Err(Error::input(
             path,
