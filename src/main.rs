@@ -40,9 +40,13 @@ struct NormalOpts {
     /// inputs'; an error without them), estimate (ignore the inputs' normals).
     #[arg(long, default_value = "auto")]
     normals: String,
-    /// Neighbours per plane fit when estimating normals (the point itself included).
+    /// Neighbours per plane fit when estimating normals (the point itself included); cells
+    /// whose points are noisy use more, up to 6 times as many (see --fixed-neighbours).
     #[arg(long, default_value_t = scanflow::normals::DEFAULT_K)]
     neighbours: usize,
+    /// Use exactly --neighbours everywhere, even where noise dominates the fits.
+    #[arg(long)]
+    fixed_neighbours: bool,
     /// Re-fit each estimated normal once with robust (Cauchy) weights: less pulled by noise
     /// and outliers, a little slower.
     #[arg(long)]
@@ -62,6 +66,7 @@ impl NormalOpts {
         scanflow::normals::NormalParams {
             k: self.neighbours,
             robust: self.robust_normals,
+            adaptive: !self.fixed_neighbours,
         }
     }
 }
@@ -315,11 +320,12 @@ fn run(cli: Cli) -> Result<()> {
             let st = scanflow::store::ingest(&specs, &output, &params, &ctx)?;
             if let Some((n, secs)) = &st.normals {
                 outln!(
-                    "estimated normals for {} points in {:.2} s ({:.2} M points/s; k = {}, {} by viewpoint, {} by propagation, {} degenerate, {} components)",
+                    "estimated normals for {} points in {:.2} s ({:.2} M points/s; k = {}..{}, {} by viewpoint, {} by propagation, {} degenerate, {} components)",
                     st.points,
                     secs,
                     st.points as f64 / secs / 1e6,
                     n.k,
+                    n.k_max,
                     n.by_viewpoint,
                     n.by_propagation,
                     n.degenerate,
@@ -457,6 +463,7 @@ fn run(cli: Cli) -> Result<()> {
             let normal = NormalOpts {
                 normals: "auto".into(),
                 neighbours: scanflow::normals::DEFAULT_K,
+                fixed_neighbours: false,
                 robust_normals: false,
                 viewpoint: Vec::new(),
             };

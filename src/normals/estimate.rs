@@ -300,6 +300,32 @@ fn plane(pts: &[[f32; 3]], nbrs: &[(f32, u32)], w: Option<&[f64]>) -> Option<([f
     Some((m, [v[0] as f32, v[1] as f32, v[2] as f32]))
 }
 
+/// Thickness of the neighbourhood relative to its extent, `√(λ₀/λ₁)` of its covariance (the
+/// two smallest eigenvalues): about `2σ/r` for points with noise `σ` on a plane over a
+/// neighbourhood of radius `r`, and the normal's angular error is about that over `√k`.
+pub fn spread(pts: &[[f32; 3]], nbrs: &[(f32, u32)]) -> Option<f64> {
+    if nbrs.len() < 3 {
+        return None;
+    }
+    let n = nbrs.len() as f64;
+    let mut m = [0f64; 3];
+    for &(_, i) in nbrs {
+        let p = pts[i as usize];
+        for a in 0..3 {
+            m[a] += p[a] as f64 / n;
+        }
+    }
+    let mut c = Matrix3::<f64>::zeros();
+    for &(_, i) in nbrs {
+        let p = pts[i as usize];
+        let d = Vector3::new(p[0] as f64 - m[0], p[1] as f64 - m[1], p[2] as f64 - m[2]);
+        c += d * d.transpose();
+    }
+    let mut ev: Vec<f64> = c.symmetric_eigenvalues().iter().copied().collect();
+    ev.sort_by(|a, b| a.total_cmp(b));
+    (ev[1] > 0.0).then(|| (ev[0].max(0.0) / ev[1]).sqrt())
+}
+
 /// Unit eigenvector of the smallest eigenvalue of a symmetric positive semi-definite 3×3
 /// matrix, in closed form: eigenvalues by the trigonometric solution of the characteristic
 /// cubic (Smith 1961), the vector as the largest cross product of two rows of `A − λ₃I`.

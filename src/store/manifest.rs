@@ -56,8 +56,11 @@ pub struct Manifest {
 /// How ingest estimated the normals (absent when they came from the inputs).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct EstimatedNormals {
-    /// Neighbours per plane fit.
+    /// Neighbours per plane fit (`--neighbours`).
     pub k: usize,
+    /// Most neighbours any cell used (grown for noise).
+    #[serde(default)]
+    pub k_max: usize,
     /// Robust (reweighted) plane fits.
     pub robust: bool,
     /// Points without a plane among their neighbours (zero normals).

@@ -87,7 +87,7 @@ fn estimate_synth(
     threads: &str,
     extra: &[&str],
 ) -> (Accuracy, PathBuf) {
-    let ply = dir.join(format!("{shape}.ply"));
+    let ply = dir.join(format!("{shape}{n}.ply"));
     if !ply.exists() {
         ok(&[
             "synth",
@@ -101,9 +101,9 @@ fn estimate_synth(
         ]);
     }
     let truth = load(&ply);
-    let bare = dir.join(format!("{shape}_bare.ply"));
+    let bare = dir.join(format!("{shape}{n}_bare.ply"));
     write_xyz_ply(&bare, &truth.pos);
-    let store = dir.join(format!("{shape}_{threads}.store"));
+    let store = dir.join(format!("{shape}{n}_{threads}.store"));
     let mut args = vec![
         "ingest",
         s(&bare),
@@ -125,19 +125,34 @@ fn estimate_synth(
 #[test]
 fn synth_normals_are_accurate_and_outward() {
     let d = tempfile::tempdir().unwrap();
-    for (shape, n) in [("sphere", 50_000), ("torus", 50_000), ("bumpy", 50_000)] {
-        let ks = std::env::var("NK").unwrap_or("20".into());
-        let (a, _) = estimate_synth(d.path(), shape, n, 0.001, "2", &["--neighbours", &ks]);
+    for (shape, n) in [
+        ("sphere", 50_000),
+        ("torus", 50_000),
+        ("bumpy", 50_000),
+        ("bumpy", 400_000),
+    ] {
+        let (a, _) = estimate_synth(d.path(), shape, n, 0.001, "2", &[]);
         eprintln!(
             "{shape} {n} points, noise 0.001: {:.4} within 10°, {:.5} oriented, median {:.2}°",
             a.within, a.oriented, a.median_deg
         );
-        if std::env::var("NK").is_ok() {
-            continue;
-        }
         assert!(a.within >= 0.99, "{shape}: {:.4} within 10°", a.within);
         assert!(a.oriented >= 0.999, "{shape}: {:.5} oriented", a.oriented);
     }
+    // Dense noisy points with a fixed k = 20: noise dominates the fits (the test can fail).
+    let (a, _) = estimate_synth(
+        d.path(),
+        "bumpy",
+        400_000,
+        0.001,
+        "1",
+        &["--fixed-neighbours"],
+    );
+    eprintln!(
+        "bumpy 400000 points, fixed k = 20: {:.4} within 10°, median {:.2}°",
+        a.within, a.median_deg
+    );
+    assert!(a.within < 0.9, "{:.4}", a.within);
 }
 
 #[test]
