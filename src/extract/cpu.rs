@@ -102,6 +102,8 @@ pub struct TileMesh {
     pub triangles: Vec<[u32; 3]>,
     /// Colour of each vertex (empty when the input points have none).
     pub colors: Vec<[u8; 3]>,
+    /// Intensity of each vertex (empty when the input points have none).
+    pub intensity: Vec<f32>,
 }
 
 impl TileMesh {
@@ -111,6 +113,7 @@ impl TileMesh {
         self.positions.clear();
         self.triangles.clear();
         self.colors.clear();
+        self.intensity.clear();
     }
 }
 

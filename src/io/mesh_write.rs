@@ -73,6 +73,7 @@ pub struct MeshPlyWriter {
     faces: Option<BufWriter<File>>,
     /// Whether vertices carry a colour.
     with_color: bool,
+    with_intensity: bool,
     /// Vertices written.
     vertices: u64,
     /// Faces written.
@@ -89,7 +90,12 @@ fn with_suffix(path: &Path, suffix: &str) -> PathBuf {
 }
 
 /// The header lines before the padding comment, and after it.
-fn header_parts(vertices: u64, faces: u64, with_color: bool) -> (String, String) {
+fn header_parts(
+    vertices: u64,
+    faces: u64,
+    with_color: bool,
+    with_intensity: bool,
+) -> (String, String) {
     let head = "ply\nformat binary_little_endian 1.0\ncomment written by scanflow\n".to_string();
     let mut tail = format!("element vertex {vertices}\n");
     for n in ["x", "y", "z"] {
@@ -99,6 +105,9 @@ fn header_parts(vertices: u64, faces: u64, with_color: bool) -> (String, String)
         for n in ["red", "green", "blue"] {
             tail.push_str(&format!("property uchar {n}\n"));
         }
+    }
+    if with_intensity {
+        tail.push_str("property float intensity\n");
     }
     let index = if vertices <= i32::MAX as u64 {
         "int"
@@ -115,15 +124,15 @@ fn header_parts(vertices: u64, faces: u64, with_color: bool) -> (String, String)
 const PAD_MIN: usize = "comment \n".len();
 
 /// Bytes reserved for the header of a file with or without colour.
-fn reserved_bytes(with_color: bool) -> usize {
-    let (h, t) = header_parts(u64::MAX, u64::MAX, with_color);
+fn reserved_bytes(with_color: bool, with_intensity: bool) -> usize {
+    let (h, t) = header_parts(u64::MAX, u64::MAX, with_color, with_intensity);
     h.len() + t.len() + PAD_MIN
 }
 
-/// The header for the given counts, padded to exactly `reserved_bytes(with_color)` bytes.
-fn header(vertices: u64, faces: u64, with_color: bool) -> String {
-    let (head, tail) = header_parts(vertices, faces, with_color);
-    let pad = reserved_bytes(with_color) - head.len() - tail.len();
+/// The header for the given counts, padded to exactly `reserved_bytes(..)` bytes.
+fn header(vertices: u64, faces: u64, with_color: bool, with_intensity: bool) -> String {
+    let (head, tail) = header_parts(vertices, faces, with_color, with_intensity);
+    let pad = reserved_bytes(with_color, with_intensity) - head.len() - tail.len();
     let mut h = head;
     h.push_str("comment");
     h.extend(std::iter::repeat_n(' ', pad - "comment\n".len()));
@@ -138,6 +147,11 @@ impl MeshPlyWriter {
     /// Writes to the temporary file `path` + `.tmp-<pid>`, and faces to `path` +
     /// `.tmp-<pid>.faces`, next to it.
     pub fn create(path: &Path, with_color: bool) -> Result<Self> {
+        Self::create_with(path, with_color, false)
+    }
+
+    /// As [`create`](Self::create), with a float `intensity` per vertex when `with_intensity`.
+    pub fn create_with(path: &Path, with_color: bool, with_intensity: bool) -> Result<Self> {
         if path.as_os_str().is_empty() {
             return Err(Error::Usage("empty output file name".to_string()));
         }
@@ -151,9 +165,10 @@ impl MeshPlyWriter {
             out: Some(BufWriter::with_capacity(BUF_BYTES, file)),
             faces: None,
             with_color,
+            with_intensity,
             vertices: 0,
             faces_written: 0,
-            header_bytes: reserved_bytes(with_color),
+            header_bytes: reserved_bytes(with_color, with_intensity),
         };
         // From here on, a failure drops `w`, which removes the temporary files.
         let faces = File::options()
@@ -166,7 +181,7 @@ impl MeshPlyWriter {
         w.faces_path = faces_path;
         w.faces = Some(BufWriter::with_capacity(BUF_BYTES, faces));
         // A valid header for an empty mesh holds the room until `finish`.
-        let h = header(0, 0, with_color);
+        let h = header(0, 0, with_color, with_intensity);
         let tmp = &w.tmp_path;
         match w.out.as_mut() {
             Some(o) => o.write_all(h.as_bytes()).with_path(tmp)?,
@@ -192,7 +207,7 @@ impl MeshPlyWriter {
 
     /// Size of the header of every file written with or without colour, in bytes.
     pub fn header_bytes(with_color: bool) -> usize {
-        reserved_bytes(with_color)
+        reserved_bytes(with_color, false)
     }
 
     fn closed(&self) -> Error {
@@ -208,6 +223,17 @@ impl MeshPlyWriter {
     /// A coordinate that a float32 cannot hold, or a missing colour, is an [`Error::Usage`] and
     /// writes nothing.
     pub fn vertex(&mut self, p: [f64; 3], color: Option<[u8; 3]>) -> Result<()> {
+        self.vertex_with(p, color, None)
+    }
+
+    /// As [`vertex`](Self::vertex), with the intensity for a writer created with intensity
+    /// (a missing one is an [`Error::Usage`]).
+    pub fn vertex_with(
+        &mut self,
+        p: [f64; 3],
+        color: Option<[u8; 3]>,
+        intensity: Option<f32>,
+    ) -> Result<()> {
         for (axis, &v) in ["x", "y", "z"].iter().zip(&p) {
             if !(v as f32).is_finite() {
                 return Err(Error::Usage(format!(
@@ -217,11 +243,11 @@ impl MeshPlyWriter {
                 )));
             }
         }
-        let mut rec = [0u8; 15];
+        let mut rec = [0u8; 19];
         for d in 0..3 {
             rec[4 * d..4 * d + 4].copy_from_slice(&(p[d] as f32).to_le_bytes());
         }
-        let n = if self.with_color {
+        let mut n = if self.with_color {
             let Some(c) = color else {
                 return Err(Error::Usage(format!(
                     "{}: vertex {} has no colour, which the file was created with",
@@ -229,11 +255,22 @@ impl MeshPlyWriter {
                     self.vertices
                 )));
             };
-            rec[12..].copy_from_slice(&c);
+            rec[12..15].copy_from_slice(&c);
             15
         } else {
             12
         };
+        if self.with_intensity {
+            let Some(i) = intensity else {
+                return Err(Error::Usage(format!(
+                    "{}: vertex {} has no intensity, which the file was created with",
+                    self.final_path.display(),
+                    self.vertices
+                )));
+            };
+            rec[n..n + 4].copy_from_slice(&i.to_le_bytes());
+            n += 4;
+        }
         let res = match self.out.as_mut() {
             Some(o) => o.write_all(&rec[..n]).with_path(&self.tmp_path),
             None => return Err(self.closed()),
@@ -307,7 +344,12 @@ impl MeshPlyWriter {
                 self.faces_path.display()
             )));
         }
-        let h = header(self.vertices, self.faces_written, self.with_color);
+        let h = header(
+            self.vertices,
+            self.faces_written,
+            self.with_color,
+            self.with_intensity,
+        );
         if h.len() != self.header_bytes {
             return Err(Error::Internal(format!(
                 "{}: header of {} bytes does not fit the {} reserved",
@@ -321,7 +363,7 @@ impl MeshPlyWriter {
         file.sync_all().with_path(&self.tmp_path)?;
         let bytes = file.metadata().with_path(&self.tmp_path)?.len();
         drop(file);
-        let stride = if self.with_color { 15 } else { 12 };
+        let stride = 12 + 3 * self.with_color as u64 + 4 * self.with_intensity as u64;
         let expect = self.header_bytes as u64 + self.vertices * stride + face_bytes;
         if bytes != expect {
             return Err(Error::Internal(format!(
@@ -518,7 +560,8 @@ mod tests {
         for color in [false, true] {
             let n = MeshPlyWriter::header_bytes(color);
             for (v, f) in [(0, 0), (4, 4), (1 << 31, 7), (u64::MAX, u64::MAX)] {
-                let h = header(v, f, color);
+                let h = header(v, f, color, false);
+                assert_eq!(header(v, f, color, true).len(), reserved_bytes(color, true));
                 assert_eq!(h.len(), n, "{v} {f}");
                 let want = if v <= i32::MAX as u64 {
                     " int "
@@ -527,8 +570,8 @@ mod tests {
                 };
                 assert!(h.contains(&format!("property list uchar{want}vertex_indices")));
             }
-            assert!(header(i32::MAX as u64, 1, color).contains("uchar int"));
-            assert!(header(i32::MAX as u64 + 1, 1, color).contains("uchar uint"));
+            assert!(header(i32::MAX as u64, 1, color, false).contains("uchar int"));
+            assert!(header(i32::MAX as u64 + 1, 1, color, true).contains("uchar uint"));
         }
     }
 

@@ -361,6 +361,7 @@ struct SortedCell {
     pos: Vec<[f64; 3]>,
     nrm: Vec<[f32; 3]>,
     col: Vec<[u16; 4]>,
+    inten: Vec<f32>,
     ranges: Vec<(CellKey, usize, usize)>,
 }
 
@@ -380,6 +381,11 @@ impl SortedCell {
         } else {
             order.iter().map(|&i| b.color[i as usize]).collect()
         };
+        let inten: Vec<f32> = if b.intensity.is_empty() {
+            Vec::new()
+        } else {
+            order.iter().map(|&i| b.intensity[i as usize]).collect()
+        };
         let mut ranges = Vec::new();
         let mut s = 0;
         for (j, &i) in order.iter().enumerate() {
@@ -393,12 +399,14 @@ impl SortedCell {
             pos,
             nrm,
             col,
+            inten,
             ranges,
         }
     }
 
     fn bytes(&self) -> u64 {
-        (self.pos.len() * 36 + self.col.len() * 8 + self.ranges.len() * 24) as u64
+        (self.pos.len() * 36 + self.col.len() * 8 + self.inten.len() * 4 + self.ranges.len() * 24)
+            as u64
     }
 
     fn range(&self, k: CellKey) -> (usize, usize) {
@@ -513,6 +521,7 @@ impl<'a> PointSource<'a> {
                                     out.pos.push(p);
                                     let c = sc.col.get(j).copied().unwrap_or([0; 4]);
                                     out.col.push([c[0], c[1], c[2]]);
+                                    out.inten.push(sc.inten.get(j).copied().unwrap_or(0.0));
                                 }
                             }
                         }
@@ -577,6 +586,7 @@ impl<'a> PointSource<'a> {
 struct NearPoints {
     pos: Vec<[f64; 3]>,
     col: Vec<[u16; 3]>,
+    inten: Vec<f32>,
     lo: [f64; 3],
     hi: [f64; 3],
 }
@@ -591,6 +601,7 @@ pub const FIT_NEIGHBOURS: usize = 20;
 struct VertexFit {
     pos: [f64; 3],
     color: [u8; 3],
+    intensity: f32,
     /// Farthest neighbour used: the answer is exact when the gathered box reaches beyond it.
     reach: f64,
 }
@@ -621,6 +632,7 @@ impl NearPoints {
                 .map(|v| VertexFit {
                     pos: *v,
                     color: [128; 3],
+                    intensity: 0.0,
                     reach: 0.0,
                 })
                 .collect();
@@ -641,21 +653,19 @@ impl NearPoints {
             .iter()
             .enumerate()
             .map(|(vi, v)| {
-                let mut nb: Vec<(f64, [f64; 3], [u16; 3])> = tree
+                let mut nb: Vec<(f64, [f64; 3], [u16; 3], f32)> = tree
                     .nearest_n::<kiddo::SquaredEuclidean>(v, k)
                     .iter()
                     .map(|x| {
-                        (
-                            x.distance,
-                            self.pos[x.item as usize],
-                            self.col[x.item as usize],
-                        )
+                        let i = x.item as usize;
+                        (x.distance, self.pos[i], self.col[i], self.inten[i])
                     })
                     .collect();
                 nb.sort_by(|a, b| {
                     a.0.total_cmp(&b.0)
                         .then(a.1.partial_cmp(&b.1).unwrap_or(std::cmp::Ordering::Equal))
                         .then(a.2.cmp(&b.2))
+                        .then(a.3.total_cmp(&b.3))
                 });
                 nb.truncate(want);
                 let reach = nb.last().map_or(0.0, |x| x.0.sqrt());
@@ -665,18 +675,25 @@ impl NearPoints {
                 if reach >= room {
                     inexact.push(vi);
                 }
-                let mut acc = [0f64; 3];
+                let mut acc = [0f64; 4];
                 let mut sw = 0.0;
-                for (d2, _, c) in nb.iter().take(COLOUR_NEIGHBOURS) {
+                for (d2, _, c, i) in nb.iter().take(COLOUR_NEIGHBOURS) {
                     let w = 1.0 / d2.sqrt().max(h * 0.01);
                     for a in 0..3 {
                         acc[a] += w * c[a] as f64;
                     }
+                    acc[3] += w * *i as f64;
                     sw += w;
                 }
-                let color = acc.map(|c| ((c / sw) / 257.0).round().clamp(0.0, 255.0) as u8);
+                let color =
+                    [0, 1, 2].map(|a| ((acc[a] / sw) / 257.0).round().clamp(0.0, 255.0) as u8);
                 let pos = if fit { project(*v, &nb, h) } else { *v };
-                VertexFit { pos, color, reach }
+                VertexFit {
+                    pos,
+                    color,
+                    intensity: (acc[3] / sw) as f32,
+                    reach,
+                }
             })
             .collect();
         (out, inexact)
@@ -684,19 +701,19 @@ impl NearPoints {
 }
 
 /// `v` moved onto the plane of its neighbours `nb` (see [`NearPoints::fit_vertices`]).
-fn project(v: [f64; 3], nb: &[(f64, [f64; 3], [u16; 3])], h: f64) -> [f64; 3] {
+fn project(v: [f64; 3], nb: &[(f64, [f64; 3], [u16; 3], f32)], h: f64) -> [f64; 3] {
     if nb.len() < 3 || nb[0].0 > 4.0 * h * h {
         return v;
     }
     let n = nb.len() as f64;
     let mut c = [0f64; 3];
-    for (_, p, _) in nb {
+    for (_, p, _, _) in nb {
         for a in 0..3 {
             c[a] += p[a] / n;
         }
     }
     let mut m = nalgebra::Matrix3::<f64>::zeros();
-    for (_, p, _) in nb {
+    for (_, p, _, _) in nb {
         let d = nalgebra::Vector3::new(p[0] - c[0], p[1] - c[1], p[2] - c[2]);
         m += d * d.transpose();
     }
@@ -884,7 +901,7 @@ fn read_leaf(dir: &Path, key: CellKey, m: usize) -> Result<LeafDetail> {
     })
 }
 
-const TILE_MAGIC: &[u8; 8] = b"SFTILE02";
+const TILE_MAGIC: &[u8; 8] = b"SFTILE03";
 
 fn tile_path(dir: &Path, t: u64) -> PathBuf {
     dir.join(format!("{t:016x}.zst"))
@@ -898,6 +915,7 @@ fn write_tile(path: &Path, m: &TileMesh) -> Result<()> {
     raw.extend_from_slice(&(m.keys.len() as u64).to_le_bytes());
     raw.extend_from_slice(&(m.triangles.len() as u64).to_le_bytes());
     raw.extend_from_slice(&(m.colors.len() as u64).to_le_bytes());
+    raw.extend_from_slice(&(m.intensity.len() as u64).to_le_bytes());
     for k in &m.keys {
         raw.extend_from_slice(&k.0.to_le_bytes());
     }
@@ -914,6 +932,9 @@ fn write_tile(path: &Path, m: &TileMesh) -> Result<()> {
     for c in &m.colors {
         raw.extend_from_slice(c);
     }
+    for v in &m.intensity {
+        raw.extend_from_slice(&v.to_le_bytes());
+    }
     let z = zstd::bulk::compress(&raw, 1)
         .map_err(|e| Error::Internal(format!("zstd compression failed: {e}")))?;
     let tmp = path.with_extension("tmp");
@@ -925,7 +946,7 @@ fn read_tile(path: &Path) -> Result<TileMesh> {
     let z = std::fs::read(path).with_path(path)?;
     let bad = |what: &str| Error::input(path, format!("corrupt tile checkpoint: {what}"));
     let raw = zstd::stream::decode_all(&z[..]).map_err(|e| bad(&e.to_string()))?;
-    if raw.len() < 32 || &raw[..8] != TILE_MAGIC {
+    if raw.len() < 40 || &raw[..8] != TILE_MAGIC {
         return Err(bad("wrong magic"));
     }
     let u64_at = |o: usize| {
@@ -933,12 +954,16 @@ fn read_tile(path: &Path) -> Result<TileMesh> {
         a.copy_from_slice(&raw[o..o + 8]);
         u64::from_le_bytes(a)
     };
-    let (nv, nt, nc) = (u64_at(8) as usize, u64_at(16) as usize, u64_at(24) as usize);
-    if !(nc == 0 || nc == nv) || raw.len() != 32 + nv * 32 + nt * 12 + nc * 3 {
+    let (nv, nt) = (u64_at(8) as usize, u64_at(16) as usize);
+    let (nc, ni) = (u64_at(24) as usize, u64_at(32) as usize);
+    if !(nc == 0 || nc == nv)
+        || !(ni == 0 || ni == nv)
+        || raw.len() != 40 + nv * 32 + nt * 12 + nc * 3 + ni * 4
+    {
         return Err(bad("wrong size"));
     }
     let mut m = TileMesh::default();
-    let mut o = 32;
+    let mut o = 40;
     for _ in 0..nv {
         m.keys.push(crate::extract::cpu::EdgeKey(u64_at(o)));
         o += 8;
@@ -956,8 +981,13 @@ fn read_tile(path: &Path) -> Result<TileMesh> {
         }
         m.triangles.push(t);
     }
-    for c in raw[o..].chunks_exact(3) {
+    for c in raw[o..o + nc * 3].chunks_exact(3) {
         m.colors.push([c[0], c[1], c[2]]);
+    }
+    o += nc * 3;
+    for v in raw[o..].chunks_exact(4) {
+        m.intensity
+            .push(f32::from_le_bytes([v[0], v[1], v[2], v[3]]));
     }
     Ok(m)
 }
@@ -1175,7 +1205,8 @@ pub fn reconstruct(
     }
     stage.finish(None);
     let with_color = m.attributes.color;
-    let near_src = (with_color || params.fit).then(|| std::sync::Mutex::new(src));
+    let with_intensity = m.attributes.intensity;
+    let near_src = (with_color || with_intensity || params.fit).then(|| std::sync::Mutex::new(src));
     let iso = if iso_count > 0 {
         iso_sum / iso_count as f64
     } else {
@@ -1197,7 +1228,8 @@ pub fn reconstruct(
     if let Some(g) = &gpu {
         log::info!("extracting tiles on the GPU: {}", g.adapter_name());
     }
-    let writer = std::cell::RefCell::new(MeshPlyWriter::create(out, with_color)?);
+    let writer =
+        std::cell::RefCell::new(MeshPlyWriter::create_with(out, with_color, with_intensity)?);
     let mut welder = Welder::new();
     // Tiles in Morton order reuse the leaves of their neighbours: the cache keeps twice the
     // leaves of the last wave (the next wave's tiles are its neighbours), within a sixth of
@@ -1296,6 +1328,9 @@ pub fn reconstruct(
                     if with_color {
                         mesh.colors = fits.iter().map(|f| f.color).collect();
                     }
+                    if with_intensity {
+                        mesh.intensity = fits.iter().map(|f| f.intensity).collect();
+                    }
                 }
                 write_tile(&tile_path(&tiles_dir, tt), &mesh)?;
                 Ok((tt, mesh))
@@ -1365,7 +1400,13 @@ pub fn reconstruct(
                 tt,
                 &mesh,
                 last_tile,
-                |_, i, p| writer.borrow_mut().vertex(p, mesh.colors.get(i).copied()),
+                |_, i, p| {
+                    writer.borrow_mut().vertex_with(
+                        p,
+                        mesh.colors.get(i).copied(),
+                        mesh.intensity.get(i).copied(),
+                    )
+                },
                 |tri| writer.borrow_mut().triangle(tri),
             )?;
             tiles_done += 1;
@@ -1448,6 +1489,7 @@ fn trim_mesh(mesh: &mut TileMesh, keep: impl Fn([f64; 3]) -> bool) {
     let mut keys = Vec::new();
     let mut positions = Vec::new();
     let mut colors = Vec::new();
+    let mut intensity = Vec::new();
     for t in &mesh.triangles {
         let p = t.map(|i| mesh.positions[i as usize]);
         let c = [0, 1, 2].map(|a| (p[0][a] + p[1][a] + p[2][a]) / 3.0);
@@ -1463,6 +1505,9 @@ fn trim_mesh(mesh: &mut TileMesh, keep: impl Fn([f64; 3]) -> bool) {
                 if let Some(c) = mesh.colors.get(i) {
                     colors.push(*c);
                 }
+                if let Some(v) = mesh.intensity.get(i) {
+                    intensity.push(*v);
+                }
             }
             used[i]
         });
@@ -1472,6 +1517,7 @@ fn trim_mesh(mesh: &mut TileMesh, keep: impl Fn([f64; 3]) -> bool) {
     mesh.keys = keys;
     mesh.positions = positions;
     mesh.colors = colors;
+    mesh.intensity = intensity;
 }
 
 /// Refuse point sets that span no volume: a plane or a line has no inside.
@@ -1688,18 +1734,18 @@ mod tests {
     fn projection_follows_precise_points_and_ignores_noise() {
         let h = 0.01;
         // Precise points on z = 0: a vertex 0.3 voxel above moves onto the plane.
-        let mut nb: Vec<(f64, [f64; 3], [u16; 3])> = Vec::new();
+        let mut nb: Vec<(f64, [f64; 3], [u16; 3], f32)> = Vec::new();
         for i in 0..5 {
             for j in 0..4 {
                 let p = [i as f64 * 0.004 - 0.008, j as f64 * 0.004 - 0.006, 0.0];
-                nb.push((p[0] * p[0] + p[1] * p[1], p, [0; 3]));
+                nb.push((p[0] * p[0] + p[1] * p[1], p, [0; 3], 0.0));
             }
         }
         nb.sort_by(|a, b| a.0.total_cmp(&b.0));
         let v = project([0.0, 0.0, 0.003], &nb, h);
         assert!(v[2].abs() < 1e-9, "{v:?}");
         // Too far from every point (more than two voxels): left alone.
-        let far: Vec<_> = nb.iter().map(|x| (x.0 + 1.0, x.1, x.2)).collect();
+        let far: Vec<_> = nb.iter().map(|x| (x.0 + 1.0, x.1, x.2, x.3)).collect();
         assert_eq!(project([0.0, 0.0, 0.003], &far, h), [0.0, 0.0, 0.003]);
         // Noisy points: an offset within the plane's error is not followed.
         let noisy: Vec<_> = nb
@@ -1707,7 +1753,7 @@ mod tests {
             .enumerate()
             .map(|(i, x)| {
                 let z = if i % 2 == 0 { 0.004 } else { -0.004 };
-                (x.0, [x.1[0], x.1[1], z], x.2)
+                (x.0, [x.1[0], x.1[1], z], x.2, x.3)
             })
             .collect();
         let v = project([0.0, 0.0, 0.0015], &noisy, h);

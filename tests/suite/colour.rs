@@ -163,4 +163,12 @@ fn autzen_lidar_gives_an_open_coloured_terrain() {
     assert!(v[0] >= 20.0, "{got}: distinct colours");
     assert!(v[1] > 150.0, "{got}: colours were not scaled to 8 bits");
     assert!(v[2] > 0.8, "{got}: the terrain does not face up");
+    // Intensity too, as a float property with varied values.
+    let inten = py(
+        "import sys, plyfile, numpy as np\nv = plyfile.PlyData.read(sys.argv[1])['vertex']\nprint(v['intensity'].dtype, len(np.unique(v['intensity'])), float(v['intensity'].max()))",
+        &out,
+    );
+    let parts: Vec<&str> = inten.split(' ').collect();
+    assert_eq!(parts[0], "float32", "{inten}");
+    assert!(parts[1].parse::<usize>().unwrap() >= 20, "{inten}");
 }
