@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
 """Open3D's normal estimation on the same points as scanflow, and both against the exact normals.
 
-usage: normals_peer.py BARE.ply TRUTH.ply [--store STORE] [--neighbours 20] [--orient]
-                       [--ours-seconds S] [--ours-ingest-seconds S --plain-ingest-seconds S]
+usage: normals_peer.py BARE.ply TRUTH.ply [--ours LABEL REPORTED_S INGEST_S STORE ...]
+                       [--plain-ingest-seconds S] [--neighbours 20] [--orient] [--repeat R]
 
 BARE.ply: the points (x y z, no normals) both tools get. TRUTH.ply: the same points with the
 exact normals of the synthetic surface (scanflow synth's output). Times, on BARE.ply's points:
@@ -14,8 +14,8 @@ exact normals of the synthetic surface (scanflow synth's output). Times, on BARE
       on the sorted cloud
 Threads: Open3D's OpenMP pool (set OMP_NUM_THREADS; bench_normals.sh sets it to THREADS).
 
-Accuracy, when --store is given (a store made by `scanflow ingest --normals estimate`): the
-store's normals are read back (manifest.json + zstd cells of fixed-width records), matched to
+Accuracy, for each --ours store (made by `scanflow ingest --normals estimate`): the store's
+normals are read back (manifest.json + zstd cells of fixed-width records), matched to
 the truth by exact position (the store keeps the input's float32 coordinates exactly), and
 reported as the angle to the exact normal (unoriented: acos|n.t|, mean and p95, degrees) and the
 fraction pointing inward (n.t < 0; the tools orient outward). Open3D's are reported the same way;
@@ -156,15 +156,19 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("bare")
     ap.add_argument("truth")
-    ap.add_argument("--store")
+    ap.add_argument("--ours", nargs=4, action="append", default=[],
+                    metavar=("LABEL", "REPORTED_S", "INGEST_S", "STORE"),
+                    help="one scanflow mode: its label, the normal-estimation seconds it reported "
+                         "('-' if none), the whole `ingest --normals estimate` seconds, its store "
+                         "('-' to skip reading it back). The first one is judged against the target.")
+    ap.add_argument("--plain-ingest-seconds", type=float,
+                    help="`ingest --normals use` of the file with normals: the baseline subtracted "
+                         "from a whole ingest when a mode reported no figure")
     ap.add_argument("--neighbours", type=int, default=20)
     ap.add_argument("--orient", action="store_true",
                     help="also time orient_normals_consistent_tangent_plane (minutes and ~2.6 KB/point)")
     ap.add_argument("--repeat", type=int, default=1,
                     help="best of this many timings of estimate_normals on the sorted points")
-    ap.add_argument("--ours-seconds", type=float, help="scanflow's reported normal-estimation time")
-    ap.add_argument("--ours-ingest-seconds", type=float, help="ingest --normals estimate, whole process")
-    ap.add_argument("--plain-ingest-seconds", type=float, help="ingest --normals use of the file with normals")
     ap.add_argument("--json")
     a = ap.parse_args()
 
@@ -181,7 +185,7 @@ def main():
 
     k = a.neighbours
     res = dict(points=n, neighbours=k, omp_num_threads=os.environ.get("OMP_NUM_THREADS"),
-               cpus=os.cpu_count(), open3d=o3d.__version__)
+               cpus=os.cpu_count(), open3d=o3d.__version__, ours=[])
     # Input order (as given to both tools; synth writes points in random order) ...
     pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pos.astype(np.float64)))
     t0 = time.perf_counter()
@@ -208,33 +212,38 @@ def main():
         res["o3d_orient_acc"] = accuracy(np.asarray(pcs.normals), tn[order])
     del pcs
 
-    if a.store:
-        t0 = time.perf_counter()
-        rec, man = read_store(a.store)
-        res["store_read_s"] = time.perf_counter() - t0
-        if "nx" not in rec.dtype.names:
-            print(f"{a.store} holds no normals (fields {man['record_fields']})")
-        else:
-            spos = np.stack([rec[c] for c in "xyz"], 1).astype(np.float32)
-            p = match(pos, spos)
-            if p is None:
-                print("store positions do not match the input's exactly: normals not compared")
+    for label, reported, ingest, store in a.ours:
+        o = dict(label=label, reported_s=None if reported == "-" else float(reported),
+                 ingest_s=float(ingest))
+        o["s"] = o["reported_s"] or ((o["ingest_s"] - a.plain_ingest_seconds)
+                                     if a.plain_ingest_seconds is not None else None)
+        if store != "-":
+            t0 = time.perf_counter()
+            rec, man = read_store(store)
+            o["store_read_s"] = time.perf_counter() - t0
+            o["store_estimated_normals"] = man.get("estimated_normals")
+            if "nx" not in rec.dtype.names:
+                print(f"{store} holds no normals (fields {man['record_fields']})")
             else:
-                sn = np.stack([rec[c] for c in ("nx", "ny", "nz")], 1)[p].astype(np.float64)
-                res["ours_acc"] = accuracy(sn, tn)
-        res["store_estimated_normals"] = man.get("estimated_normals")
+                p = match(pos, np.stack([rec[c] for c in "xyz"], 1).astype(np.float32))
+                if p is None:
+                    print(f"{store}: positions do not match the input's exactly: normals not compared")
+                else:
+                    sn = np.stack([rec[c] for c in ("nx", "ny", "nz")], 1)[p].astype(np.float64)
+                    o["acc"] = accuracy(sn, tn)
+        res["ours"].append(o)
 
     mps = lambda s: n / s / 1e6  # noqa: E731
     print(f"{n} points, k = {k}; Open3D {res['open3d']} with OMP_NUM_THREADS={res['omp_num_threads']} "
           f"on {res['cpus']} cpus")
     rows = []
-    if a.ours_seconds:
-        rows.append(("scanflow normals (fit + orient, as it reports), best run", a.ours_seconds))
-    if a.ours_ingest_seconds and a.plain_ingest_seconds:
-        rows.append(("scanflow ingest --normals estimate minus plain ingest",
-                     a.ours_ingest_seconds - a.plain_ingest_seconds))
-    if a.ours_ingest_seconds:
-        rows.append(("scanflow whole ingest --normals estimate", a.ours_ingest_seconds))
+    for o in res["ours"]:
+        if o["reported_s"]:
+            rows.append((f"scanflow {o['label']}: normals as it reports, best run", o["reported_s"]))
+        if a.plain_ingest_seconds is not None:
+            rows.append((f"scanflow {o['label']}: whole ingest minus plain ingest",
+                         o["ingest_s"] - a.plain_ingest_seconds))
+        rows.append((f"scanflow {o['label']}: whole ingest", o["ingest_s"]))
     rows.append(("open3d estimate_normals (fit only), input order", res["o3d_estimate_s"]))
     rows.append((f"open3d estimate_normals (fit only), Morton-sorted, best of {max(1, a.repeat)}",
                  res["o3d_estimate_sorted_s"]))
@@ -242,24 +251,27 @@ def main():
     if a.orient:
         rows.append(("open3d + orient_normals_consistent_tangent_plane (sorted)",
                      res["o3d_estimate_sorted_s"] + res["o3d_orient_s"]))
+    w = max(len(r[0]) for r in rows)
     for name, s in rows:
-        print(f"  {name:58s} {s:8.2f} s {mps(s):8.2f} M points/s" if s > 0 else f"  {name:58s} {s:8.2f} s")
-    ours = a.ours_seconds or ((a.ours_ingest_seconds - a.plain_ingest_seconds)
-                              if a.ours_ingest_seconds and a.plain_ingest_seconds else None)
-    if ours and ours > 0:
-        print(f"ratio scanflow/open3d time: {ours / est:.2f} against estimate_normals alone (faster order)"
-              + (f", {ours / (res['o3d_estimate_sorted_s'] + res['o3d_orient_s']):.3f} against estimate + orient"
-                 if a.orient else ""))
-        print(f"target >= 1 M points/s: {'target met' if n / ours >= 1e6 else 'target not met'} "
-              f"({mps(ours):.2f} M points/s)")
-        res["ours_s"] = ours
-    else:
-        print("target >= 1 M points/s: no scanflow figure (see above)")
-    if "store_read_s" in res:
-        print(f"store read back in {res['store_read_s']:.2f} s (python)")
+        print(f"  {name:{w}s} {s:8.2f} s {mps(s):8.2f} M points/s" if s > 0 else f"  {name:{w}s} {s:8.2f} s")
+    for j, o in enumerate(res["ours"]):
+        if not o["s"] or o["s"] <= 0:
+            print(f"scanflow {o['label']}: no usable figure")
+            continue
+        print(f"ratio scanflow {o['label']}/open3d time: {o['s'] / est:.2f} against estimate_normals "
+              "alone (faster order)"
+              + (f", {o['s'] / (res['o3d_estimate_sorted_s'] + res['o3d_orient_s']):.3f} against "
+                 "estimate + orient" if a.orient else ""))
+        verdict = "target met" if n / o["s"] >= 1e6 else "target not met"
+        print(f"{'target' if j == 0 else '(for information)'} >= 1 M points/s, {o['label']}: "
+              f"{verdict} ({mps(o['s']):.2f} M points/s)")
     print("accuracy (against the exact normals of the synthetic surface):")
-    if "ours_acc" in res:
-        print(f"  {'scanflow':36s} {fmt_acc(res['ours_acc'])}")
+    for o in res["ours"]:
+        if "acc" in o:
+            print(f"  {'scanflow ' + o['label']:36s} {fmt_acc(o['acc'])}")
+            e = o.get("store_estimated_normals") or {}
+            if e:
+                print(f"  {'':36s} (store says: {', '.join(f'{k2} {v}' for k2, v in e.items())})")
     print(f"  {'open3d estimate_normals':36s} {fmt_acc(res['o3d_estimate_acc'])}")
     if a.orient:
         print(f"  {'open3d + orient_consistent_tangent':36s} {fmt_acc(res['o3d_orient_acc'])}")
