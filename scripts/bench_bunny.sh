@@ -31,6 +31,7 @@
 #   DATA=DIR       the bunny directory (default ../shared/data/bunny, next to the repository)
 set -euo pipefail
 cd "$(dirname "$0")/.."
+. scripts/peer_env.sh
 export PYTHONDONTWRITEBYTECODE=1   # no __pycache__ in scripts/
 DEPTH=${1:-8}
 THREADS=${THREADS:-2}
@@ -44,26 +45,10 @@ for f in "$CONF" "$REF"; do [ -f "$f" ] || { echo "missing $f (the Stanford bunn
 
 # --- Python side: Open3D (wheels for CPython 3.8-3.12 x86-64), numpy, scipy, plyfile; zstandard
 # or the zstd command to read the store back
-if ! python3 -c "import open3d, numpy, scipy, plyfile" 2>/dev/null; then
-  python3 -m pip install --quiet --disable-pip-version-check open3d numpy scipy plyfile || {
-    echo "pip could not install open3d numpy scipy plyfile (no index reachable? Python $(python3 -V 2>&1))" >&2; exit 1; }
-  if ! python3 -c "import open3d" 2>/dev/null && command -v apt-get >/dev/null; then
-    apt-get install -y -qq libgomp1 libusb-1.0-0 >/dev/null 2>&1 || true   # Open3D's shared-library deps
-  fi
-  python3 -c "import open3d" || { echo "open3d does not import" >&2; exit 1; }
-fi
-python3 -c "import zstandard" 2>/dev/null || command -v zstd >/dev/null ||
-  python3 -m pip install --quiet --disable-pip-version-check zstandard || true
+need_open3d numpy scipy plyfile
 
 # --- scanflow
-if [ -n "${SCANFLOW:-}" ]; then BIN=$SCANFLOW
-else
-  BIN=$PWD/target/release/scanflow
-  [ "${BUILD:-1}" = 0 ] || cargo build --release --quiet
-fi
-[ -x "$BIN" ] || { echo "no scanflow binary at $BIN" >&2; exit 1; }
-"$BIN" reconstruct --help | grep -q -- '--normals' || {
-  echo "$BIN has no --normals (normal estimation): too old" >&2; exit 1; }
+scanflow_bin reconstruct
 
 if [ -n "${KEEP:-}" ]; then TMP=$KEEP; mkdir -p "$TMP"; rm -rf "$TMP"/bunny_*.ply "$TMP"/bunny_*.ply.work "$TMP/store"
 else TMP=$(mktemp -d -t scanflow-bunny-XXXX); trap 'rm -rf "$TMP"' EXIT; fi

@@ -28,6 +28,7 @@
 #   KEEP=DIR       keep the points, stores and logs in DIR
 set -euo pipefail
 cd "$(dirname "$0")/.."
+. scripts/peer_env.sh
 export PYTHONDONTWRITEBYTECODE=1   # no __pycache__ in scripts/
 N=${1:-2000000}
 THREADS=${THREADS:-2}
@@ -37,26 +38,10 @@ REPEAT=${REPEAT:-3}
 ORIENT=${ORIENT:-auto}
 
 # --- Python side: Open3D, numpy (zstandard optional: the zstd command reads the store too)
-if ! python3 -c "import open3d, numpy" 2>/dev/null; then
-  python3 -m pip install --quiet --disable-pip-version-check open3d numpy || {
-    echo "pip could not install open3d numpy (no index reachable? Python $(python3 -V 2>&1))" >&2; exit 1; }
-  if ! python3 -c "import open3d" 2>/dev/null && command -v apt-get >/dev/null; then
-    apt-get install -y -qq libgomp1 libusb-1.0-0 >/dev/null 2>&1 || true   # Open3D's shared-library deps
-  fi
-  python3 -c "import open3d" || { echo "open3d does not import" >&2; exit 1; }
-fi
-python3 -c "import zstandard" 2>/dev/null || command -v zstd >/dev/null ||
-  python3 -m pip install --quiet --disable-pip-version-check zstandard || true
+need_open3d numpy
 
 # --- scanflow
-if [ -n "${SCANFLOW:-}" ]; then BIN=$SCANFLOW
-else
-  BIN=$PWD/target/release/scanflow
-  [ "${BUILD:-1}" = 0 ] || cargo build --release --quiet
-fi
-[ -x "$BIN" ] || { echo "no scanflow binary at $BIN" >&2; exit 1; }
-"$BIN" ingest --help | grep -q -- '--normals' || {
-  echo "$BIN ingest has no --normals (normal estimation): too old" >&2; exit 1; }
+scanflow_bin ingest
 
 if [ -n "${KEEP:-}" ]; then TMP=$KEEP; mkdir -p "$TMP"; rm -rf "$TMP"/store_*
 else TMP=$(mktemp -d -t scanflow-normals-XXXX); trap 'rm -rf "$TMP"' EXIT; fi

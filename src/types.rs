@@ -46,6 +46,25 @@ impl Aabb {
         r
     }
 
+    /// The box enlarged by `h` on every side.
+    pub fn grown(&self, h: f64) -> Aabb {
+        Aabb {
+            min: self.min.map(|v| v - h),
+            max: self.max.map(|v| v + h),
+        }
+    }
+
+    /// True when `p` lies in the box (faces included).
+    #[inline]
+    pub fn contains(&self, p: [f64; 3]) -> bool {
+        (0..3).all(|i| p[i] >= self.min[i] && p[i] <= self.max[i])
+    }
+
+    /// True when the two boxes share a point.
+    pub fn meets(&self, o: &Aabb) -> bool {
+        (0..3).all(|i| self.min[i] <= o.max[i] && o.min[i] <= self.max[i])
+    }
+
     /// Edge lengths.
     pub fn extent(&self) -> [f64; 3] {
         [

@@ -269,6 +269,18 @@ pub fn fit_normal(pts: &[[f32; 3]], nbrs: &[(f32, u32)], robust: bool) -> Option
 
 /// Weighted mean and least-variance direction of the neighbours.
 fn plane(pts: &[[f32; 3]], nbrs: &[(f32, u32)], w: Option<&[f64]>) -> Option<([f64; 3], [f32; 3])> {
+    let (m, c) = covariance(pts, nbrs, w)?;
+    let v = least_eigenvector(&c)?;
+    Some((m, [v[0] as f32, v[1] as f32, v[2] as f32]))
+}
+
+/// Weighted mean and scatter matrix `Σ wⱼ (q − q̄)(q − q̄)ᵀ` of the neighbours (weights 1
+/// without `w`); `None` when the weights sum to nothing.
+fn covariance(
+    pts: &[[f32; 3]],
+    nbrs: &[(f32, u32)],
+    w: Option<&[f64]>,
+) -> Option<([f64; 3], Matrix3<f64>)> {
     let mut sw = 0.0;
     let mut m = [0f64; 3];
     for (j, &(_, i)) in nbrs.iter().enumerate() {
@@ -296,8 +308,7 @@ fn plane(pts: &[[f32; 3]], nbrs: &[(f32, u32)], w: Option<&[f64]>) -> Option<([f
         c[5] += wj * d[2] * d[2];
     }
     let mat = Matrix3::new(c[0], c[1], c[2], c[1], c[3], c[4], c[2], c[4], c[5]);
-    let v = least_eigenvector(&mat)?;
-    Some((m, [v[0] as f32, v[1] as f32, v[2] as f32]))
+    Some((m, mat))
 }
 
 /// Thickness of the neighbourhood relative to its extent, `√(λ₀/λ₁)` of its covariance (the
@@ -307,20 +318,7 @@ pub fn spread(pts: &[[f32; 3]], nbrs: &[(f32, u32)]) -> Option<f64> {
     if nbrs.len() < 3 {
         return None;
     }
-    let n = nbrs.len() as f64;
-    let mut m = [0f64; 3];
-    for &(_, i) in nbrs {
-        let p = pts[i as usize];
-        for a in 0..3 {
-            m[a] += p[a] as f64 / n;
-        }
-    }
-    let mut c = Matrix3::<f64>::zeros();
-    for &(_, i) in nbrs {
-        let p = pts[i as usize];
-        let d = Vector3::new(p[0] as f64 - m[0], p[1] as f64 - m[1], p[2] as f64 - m[2]);
-        c += d * d.transpose();
-    }
+    let (_, c) = covariance(pts, nbrs, None)?;
     let mut ev: Vec<f64> = c.symmetric_eigenvalues().iter().copied().collect();
     ev.sort_by(|a, b| a.total_cmp(b));
     (ev[1] > 0.0).then(|| (ev[0].max(0.0) / ev[1]).sqrt())

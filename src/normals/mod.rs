@@ -206,17 +206,6 @@ impl<'a> PosCache<'a> {
     }
 }
 
-fn boxes_meet(a: &Aabb, b: &Aabb) -> bool {
-    (0..3).all(|k| a.min[k] <= b.max[k] && b.min[k] <= a.max[k])
-}
-
-fn grow(b: &Aabb, h: f64) -> Aabb {
-    Aabb {
-        min: b.min.map(|v| v - h),
-        max: b.max.map(|v| v + h),
-    }
-}
-
 fn side_path(dir: &Path, i: usize) -> PathBuf {
     dir.join(format!("{i}.nrm"))
 }
@@ -298,15 +287,15 @@ pub fn estimate_cells(
         for (&c, f) in ids.iter().zip(&firsts) {
             let mut halo = Halo::default();
             if f.h > 0.0 {
-                let reach = grow(&cell_boxes[c], f.h);
+                let reach = cell_boxes[c].grown(f.h);
                 for (o, e) in cells.iter().enumerate() {
-                    if o == c || !boxes_meet(&reach, &e.bounds) {
+                    if o == c || !reach.meets(&e.bounds) {
                         continue;
                     }
                     let other = cache.get(o)?;
                     let centre = f.centre;
                     for (k, p) in other.pos.iter().enumerate() {
-                        if (0..3).all(|a| p[a] >= reach.min[a] && p[a] <= reach.max[a]) {
+                        if reach.contains(*p) {
                             halo.pos.push(rel(*p, centre));
                             halo.origin.push((o as u32, k as u32));
                         }

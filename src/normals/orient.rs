@@ -90,6 +90,57 @@ fn bin(cost: f32) -> usize {
     ((cost.max(0.0).sqrt() * (BINS - 1) as f32) as usize).min(BINS - 1)
 }
 
+/// Prim's frontier: edges `(to, from)` in buckets of their binned cost.
+struct Frontier {
+    buckets: Vec<Vec<(u32, u32)>>,
+    /// No bucket below this one holds an edge.
+    low: usize,
+    queued: usize,
+    /// Lowest bin seen toward each vertex not yet in a tree: an edge that does not improve on
+    /// it is never queued (Prim's decrease-key, done lazily).
+    best: Vec<u16>,
+}
+
+impl Frontier {
+    fn new(n: usize) -> Frontier {
+        Frontier {
+            buckets: vec![Vec::new(); BINS],
+            low: BINS,
+            queued: 0,
+            best: vec![u16::MAX; n],
+        }
+    }
+
+    /// Queue the edges from vertex `i` to the vertices of `g` not yet in a tree.
+    fn push_edges(&mut self, g: &Graph, comp: &[u32], normals: &[[f32; 3]], i: usize) {
+        for &t in g.row(i) {
+            let tu = t as usize;
+            if comp[tu] == u32::MAX {
+                let b = bin(1.0 - dot(normals[i], normals[tu]).abs());
+                if (b as u16) < self.best[tu] {
+                    self.best[tu] = b as u16;
+                    self.buckets[b].push((t, i as u32));
+                    self.queued += 1;
+                    self.low = self.low.min(b);
+                }
+            }
+        }
+    }
+
+    /// The cheapest queued edge (last in first out within a bin).
+    fn pop(&mut self) -> Option<(u32, u32)> {
+        if self.queued == 0 {
+            self.low = BINS;
+            return None;
+        }
+        while self.buckets[self.low].is_empty() {
+            self.low += 1;
+        }
+        self.queued -= 1;
+        self.buckets[self.low].pop()
+    }
+}
+
 /// Orient `normals` in place along minimum spanning trees of `g` (costs `1 − |nᵢ·nⱼ|`).
 /// `view[i]` is the unit direction from point `i` toward its scanner, or zero; `view` may be
 /// empty when no scan has a viewpoint. Prim's algorithm over a bucket queue of the costs binned
@@ -100,12 +151,7 @@ pub fn orient_local(normals: &mut [[f32; 3]], g: &Graph, view: &[[f32; 3]]) -> L
     let mut comp = vec![u32::MAX; n];
     let mut components = 0usize;
     let mut by_view = 0u64;
-    let mut buckets: Vec<Vec<(u32, u32)>> = vec![Vec::new(); BINS];
-    let mut low = BINS;
-    let mut queued = 0usize;
-    // Lowest bin seen toward each vertex not yet in a tree: an edge that does not improve on
-    // it is never queued (Prim's decrease-key, done lazily).
-    let mut best = vec![u16::MAX; n];
+    let mut frontier = Frontier::new(n);
     // Sign from the viewpoint when it is decisive.
     let decide = |nrm: &mut [f32; 3], i: usize| -> bool {
         if view.is_empty() {
@@ -121,26 +167,6 @@ pub fn orient_local(normals: &mut [[f32; 3]], g: &Graph, view: &[[f32; 3]]) -> L
             false
         }
     };
-    let push = |buckets: &mut Vec<Vec<(u32, u32)>>,
-                low: &mut usize,
-                queued: &mut usize,
-                best: &mut [u16],
-                comp: &[u32],
-                normals: &[[f32; 3]],
-                i: usize| {
-        for &t in g.row(i) {
-            let tu = t as usize;
-            if comp[tu] == u32::MAX {
-                let b = bin(1.0 - dot(normals[i], normals[tu]).abs());
-                if (b as u16) < best[tu] {
-                    best[tu] = b as u16;
-                    buckets[b].push((t, i as u32));
-                    *queued += 1;
-                    *low = (*low).min(b);
-                }
-            }
-        }
-    };
     for root in 0..n {
         if comp[root] != u32::MAX {
             continue;
@@ -149,23 +175,8 @@ pub fn orient_local(normals: &mut [[f32; 3]], g: &Graph, view: &[[f32; 3]]) -> L
         components += 1;
         comp[root] = c;
         by_view += decide(&mut normals[root], root) as u64;
-        push(
-            &mut buckets,
-            &mut low,
-            &mut queued,
-            &mut best,
-            &comp,
-            normals,
-            root,
-        );
-        while queued > 0 {
-            while buckets[low].is_empty() {
-                low += 1;
-            }
-            let Some((j, from)) = buckets[low].pop() else {
-                continue;
-            };
-            queued -= 1;
+        frontier.push_edges(g, &comp, normals, root);
+        while let Some((j, from)) = frontier.pop() {
             let j = j as usize;
             if comp[j] != u32::MAX {
                 continue;
@@ -178,17 +189,8 @@ pub fn orient_local(normals: &mut [[f32; 3]], g: &Graph, view: &[[f32; 3]]) -> L
                 nj = nj.map(|v| -v);
             }
             normals[j] = nj;
-            push(
-                &mut buckets,
-                &mut low,
-                &mut queued,
-                &mut best,
-                &comp,
-                normals,
-                j,
-            );
+            frontier.push_edges(g, &comp, normals, j);
         }
-        low = BINS;
     }
     Local {
         comp,

@@ -47,7 +47,7 @@ use crate::extract::cpu::{GridGeom, TileMesh, marching_cubes};
 use crate::extract::weld::Welder;
 use crate::io::mesh_write::MeshPlyWriter;
 use crate::store::Store;
-use crate::types::{CellKey, Cube, PointBatch, morton3};
+use crate::types::{Aabb, CellKey, Cube, PointBatch, morton3};
 use fft_solve::LocalGrid;
 use pou::Bump;
 
@@ -504,10 +504,9 @@ impl<'a> PointSource<'a> {
         let side = 1i64 << lvl;
         let mut m = margin;
         for _ in 0..7 {
-            let a = lo.map(|v| v - m);
-            let b = hi.map(|v| v + m);
-            let ca = self.plan.cube.cell_coords(a, lvl).map(|v| v as i64);
-            let cb = self.plan.cube.cell_coords(b, lvl).map(|v| v as i64);
+            let bx = Aabb { min: lo, max: hi }.grown(m);
+            let ca = self.plan.cube.cell_coords(bx.min, lvl).map(|v| v as i64);
+            let cb = self.plan.cube.cell_coords(bx.max, lvl).map(|v| v as i64);
             for z in ca[2].max(0)..=cb[2].min(side - 1) {
                 for y in ca[1].max(0)..=cb[1].min(side - 1) {
                     for x in ca[0].max(0)..=cb[0].min(side - 1) {
@@ -517,7 +516,7 @@ impl<'a> PointSource<'a> {
                             let (s0, e0) = sc.range(k);
                             for j in s0..e0 {
                                 let p = sc.pos[j];
-                                if (0..3).all(|q| p[q] >= a[q] && p[q] <= b[q]) {
+                                if bx.contains(p) {
                                     out.pos.push(p);
                                     let c = sc.col.get(j).copied().unwrap_or([0; 4]);
                                     out.col.push([c[0], c[1], c[2]]);
@@ -528,8 +527,8 @@ impl<'a> PointSource<'a> {
                     }
                 }
             }
-            out.lo = a;
-            out.hi = b;
+            out.lo = bx.min;
+            out.hi = bx.max;
             if !out.pos.is_empty() {
                 break;
             }
@@ -544,7 +543,8 @@ impl<'a> PointSource<'a> {
         let (l, c) = key.decode();
         let side = 1i64 << l;
         let cell_box = self.plan.cube.cell_box(key);
-        let margin = 0.4 * (cell_box.max[0] - cell_box.min[0]);
+        // The 1.8× box: 0.4 of the edge beyond each face.
+        let reach = cell_box.grown(0.4 * (cell_box.max[0] - cell_box.min[0]));
         let mut own = LeafPoints::default();
         let mut rest = LeafPoints::default();
         for dz in -1i64..=1 {
@@ -561,10 +561,7 @@ impl<'a> PointSource<'a> {
                         let (s, e) = sc.range(nk);
                         for j in s..e {
                             let p = sc.pos[j];
-                            let inside = (0..3).all(|a| {
-                                p[a] >= cell_box.min[a] - margin && p[a] <= cell_box.max[a] + margin
-                            });
-                            if inside {
+                            if reach.contains(p) {
                                 let dst = if is_own { &mut own } else { &mut rest };
                                 dst.pos.push(p);
                                 dst.nrm.push(sc.nrm[j]);
@@ -1263,14 +1260,14 @@ pub fn reconstruct(
         }
         detail_cache.fit(2 * wave_tiles.iter().map(|w| w.2.len()).sum::<usize>());
         let mut loaded = Vec::with_capacity(wave_tiles.len());
-        let mut colour_pts: Vec<Option<NearPoints>> = Vec::with_capacity(wave_tiles.len());
+        let mut near_pts: Vec<Option<NearPoints>> = Vec::with_capacity(wave_tiles.len());
         for (tt, lo, near) in &wave_tiles {
             if params.resume && tile_path(&tiles_dir, *tt).exists() {
                 loaded.push((*tt, *lo, None));
-                colour_pts.push(None);
+                near_pts.push(None);
                 continue;
             }
-            colour_pts.push(match near_src.as_ref() {
+            near_pts.push(match near_src.as_ref() {
                 Some(src) => {
                     let mut src = src.lock().map_err(|_| {
                         Error::Internal("the colour point source was poisoned".into())
@@ -1348,7 +1345,7 @@ pub fn reconstruct(
                         .collect()
                 });
                 let mut out = Vec::with_capacity(loaded.len());
-                for (((tt, lo, _), f), cp) in loaded.iter().zip(fields).zip(&colour_pts) {
+                for (((tt, lo, _), f), cp) in loaded.iter().zip(fields).zip(&near_pts) {
                     out.push(match f {
                         None => read_tile(&tile_path(&tiles_dir, *tt)).map(|m| (*tt, m)),
                         Some(f) => {
@@ -1374,7 +1371,7 @@ pub fn reconstruct(
             None => ctx.pool.install(|| {
                 loaded
                     .par_iter()
-                    .zip(colour_pts.par_iter())
+                    .zip(near_pts.par_iter())
                     .map(|((tt, lo, ds), cp)| {
                         let Some(ds) = ds else {
                             return Ok((*tt, read_tile(&tile_path(&tiles_dir, *tt))?));

@@ -5,7 +5,6 @@ use std::path::{Path, PathBuf};
 
 use kiddo::SquaredEuclidean;
 use kiddo::immutable::float::kdtree::ImmutableKdTree;
-use scanflow::normals::NormalsMode;
 use scanflow::types::PointBatch;
 
 use super::common::*;
@@ -181,43 +180,25 @@ fn normals_mode_use_and_estimate() {
     assert_eq!(m.estimated_normals.as_ref().map(|e| e.k), Some(20));
     assert!(m.attributes.normal);
     // Bad values.
-    let err = fails(&[
-        "ingest",
-        s(&ply),
-        "-o",
-        s(&d.path().join("x")),
-        "--normals",
-        "maybe",
-    ]);
+    let bad = |extra: &[&str]| {
+        let x = d.path().join("x");
+        let mut args = vec!["ingest", s(&ply), "-o", s(&x)];
+        args.extend_from_slice(extra);
+        fails(&args)
+    };
+    let err = bad(&["--normals", "maybe"]);
     assert!(
         err.contains("--normals") && err.contains("auto, use or estimate"),
         "{err}"
     );
-    let err = fails(&[
-        "ingest",
-        s(&ply),
-        "-o",
-        s(&d.path().join("x")),
-        "--normals",
-        "estimate",
-        "--neighbours",
-        "2",
-    ]);
+    let err = bad(&["--normals", "estimate", "--neighbours", "2"]);
     assert!(err.contains("--neighbours 2"), "{err}");
-    let err = fails(&[
-        "ingest",
-        s(&ply),
-        "-o",
-        s(&d.path().join("x")),
-        "--viewpoint",
-        "1,2",
-    ]);
+    let err = bad(&["--viewpoint", "1,2"]);
     assert!(
         err.contains("--viewpoint") && err.contains("x,y,z"),
         "{err}"
     );
     assert!(!d.path().join("x").exists());
-    let _ = NormalsMode::default();
 }
 
 /// A spherical cap (x > 0.3 on the unit sphere) as seen from inside, at the centre.
