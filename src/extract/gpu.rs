@@ -25,6 +25,25 @@
 //!
 //! Only the records (4 bytes a vertex) and the triangles (12 bytes each) are read back.
 //!
+//! # Blended tiles: the field built on the device
+//!
+//! [`GpuExtractor::extract_blend`] takes a tile as a partition-of-unity blend
+//! ([`super::field`]) instead of node values. The leaves' detail grids go to a pool of slots
+//! in one device buffer, least recently used replaced first, so a leaf shared by neighbouring
+//! tiles crosses the bus once while it stays resident; with them go the coarse values around
+//! the tile, per-axis tables and a lookup box from leaf cell to slot. Pass 0 (`field.wgsl`, a
+//! thread per node) blends the values into the buffer pass 1 reads, in exact 64-bit integer
+//! arithmetic, so they are [`Blend::eval`]'s bit for bit. As the host then has no node values,
+//! pass 4 also writes the bits of each vertex's two node values (8 more bytes a vertex read
+//! back) for the host's position formula. Adapters without 64-bit integers in shaders
+//! (`wgpu::Features::SHADER_INT64`), and tiles whose leaves exceed the pool's limit, are
+//! blended on the host and uploaded as above.
+//!
+//! Whether it pays depends on the bytes: a leaf grid is `(1.5·E + 1)³` values for a cell of
+//! `E³`, so the leaves near a surface through a tile can weigh more than the tile's dense
+//! values when every leaf is sent (`benches/extract.rs` prints both); what it saves is the
+//! host's blend, and the upload of leaves already resident.
+//!
 //! # Why the host finishes the job
 //!
 //! The GPU decides the topology and the numbering: cases, which edges carry vertices, in
@@ -64,6 +83,7 @@ use rayon::prelude::*;
 use wgpu::util::DeviceExt;
 
 use super::cpu::{self, EdgeKey, GridGeom, McWorkspace, TileMesh};
+use super::field::Blend;
 use super::tables;
 use crate::error::{Error, Result};
 
@@ -125,6 +145,11 @@ pub struct GpuStats {
     pub sub_blocks: u64,
     /// True when a GPU failure sent the tile to the CPU.
     pub fell_back: bool,
+    /// Bytes sent to the device: node values, or for a blended tile
+    /// ([`GpuExtractor::extract_blend`]) the leaf grids not yet resident and the tables.
+    pub upload_bytes: u64,
+    /// True when a blended tile's field was built on the device.
+    pub field_on_gpu: bool,
 }
 
 /// The names of the adapters wgpu finds (Vulkan, Metal, DirectX 12, or the backends named by
@@ -335,6 +360,8 @@ fn iso_key(iso: f32) -> u32 {
 
 /// The compute pipelines, created once.
 struct Pipelines {
+    /// `None` without 64-bit integers in shaders: blended tiles are blended on the host.
+    field: Option<wgpu::ComputePipeline>,
     classify: wgpu::ComputePipeline,
     scan: wgpu::ComputePipeline,
     add: wgpu::ComputePipeline,
@@ -354,9 +381,15 @@ struct Buffers {
     totals_read: Option<wgpu::Buffer>,
     cells: Option<wgpu::Buffer>,
     records: Option<wgpu::Buffer>,
+    ends: Option<wgpu::Buffer>,
     tris: Option<wgpu::Buffer>,
     records_read: Option<wgpu::Buffer>,
+    ends_read: Option<wgpu::Buffer>,
     tris_read: Option<wgpu::Buffer>,
+    axes: Option<wgpu::Buffer>,
+    coarse: Option<wgpu::Buffer>,
+    own: Option<wgpu::Buffer>,
+    slots: Option<wgpu::Buffer>,
 }
 
 /// A buffer of at least `need` bytes from `slot`, replaced by one a quarter larger (within
@@ -403,11 +436,71 @@ fn copy_parallel(dst: wgpu::WriteOnly<'_, [u8]>, src: &[u8]) {
     rest.copy_from_slice(tail);
 }
 
+/// Where a tile's node values come from.
+#[derive(Clone, Copy)]
+enum Source<'a> {
+    /// The host has them: they are uploaded.
+    Dense(&'a [f32]),
+    /// The device blends them from leaf grids ([`GpuExtractor::extract_blend`]).
+    Blend(&'a Blend<'a>),
+}
+
+/// Where one sub-block's node values come from.
+#[derive(Clone, Copy)]
+enum BlockValues<'a> {
+    /// Uploaded from the host.
+    Host(&'a [f32]),
+    /// Computed by `field.wgsl`: the sub-block's offset in the tile, and the tile's words of
+    /// the shader's parameters (from `lox` on).
+    Device([usize; 3], &'a [u32; 20]),
+}
+
+/// No leaf in this cell of a blended tile's lookup box (`field.wgsl`).
+const NO_LEAF: u32 = u32::MAX;
+
+/// The device's cache of leaf detail grids: `slots` grids of `dm³` values in one buffer,
+/// replaced least recently used first. A leaf shared by neighbouring tiles crosses the bus
+/// once while it stays resident.
+#[derive(Default)]
+struct LeafPool {
+    buf: Option<wgpu::Buffer>,
+    dm: usize,
+    slots: usize,
+    slot_of: HashMap<u64, usize>,
+    key_of: Vec<Option<u64>>,
+    used: Vec<u64>,
+    clock: u64,
+}
+
+/// The lowest of the (at most two) leaf cells whose grids reach node `g` with a non-zero
+/// weight (detail offset `1..=dm−2`), and the highest (`field.wgsl`, `candidates`).
+fn leaf_cells(g: i64, e: i64, ov: i64, dm: i64) -> (i64, i64) {
+    let hi = (g + ov - 1).div_euclid(e);
+    let lo = if g - (e * (hi - 1) - ov) <= dm - 2 {
+        hi - 1
+    } else {
+        hi
+    };
+    (lo, hi)
+}
+
 /// Errors that wgpu reports outside an error scope, and the reason a device was lost.
 #[derive(Default)]
 struct Trouble {
     uncaptured: Option<String>,
     lost: Option<String>,
+}
+
+/// What [`GpuExtractor::assemble`] needs of a sub-block besides the records.
+struct Assembly<'a> {
+    /// The tile's node values when the host has them.
+    values: &'a [f32],
+    /// Else the two node values of each record's edge, from the device.
+    ends: Option<&'a [[u32; 2]]>,
+    dims: [usize; 3],
+    origin_node: [u64; 3],
+    iso: f32,
+    block: SubBlock,
 }
 
 /// What one sub-block gave.
@@ -437,9 +530,13 @@ pub struct GpuExtractor {
     /// Why the GPU is no longer used (lost device, panic in wgpu).
     broken: Option<String>,
     cpu: McWorkspace,
+    pool: LeafPool,
     gather: Vec<f32>,
     /// Vertex records of the last sub-block (block-local edge ids, bit 31 on seams).
     records: Vec<u32>,
+    /// The bits of the two node values of each record's edge, for fields built on the
+    /// device.
+    ends: Vec<[u32; 2]>,
     /// Vertex index of each record of the sub-block, where seams matched earlier vertices.
     map: Vec<u32>,
     /// Vertex of each seam edge made so far in the tile, by tile-local edge id.
@@ -527,9 +624,16 @@ impl GpuExtractor {
     fn open(adapter: wgpu::Adapter) -> GpuResult<GpuExtractor> {
         let info = adapter.get_info();
         let limits = adapter.limits();
+        // 64-bit integers build blended fields on the device (`field.rs`).
+        let int64 = adapter.features().contains(wgpu::Features::SHADER_INT64);
+        let required_features = if int64 {
+            wgpu::Features::SHADER_INT64
+        } else {
+            wgpu::Features::empty()
+        };
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("scanflow marching cubes"),
-            required_features: wgpu::Features::empty(),
+            required_features,
             required_limits: limits.clone(),
             experimental_features: wgpu::ExperimentalFeatures::disabled(),
             memory_hints: wgpu::MemoryHints::Performance,
@@ -572,6 +676,8 @@ impl GpuExtractor {
         let compact = with_common(include_str!("shaders/compact.wgsl"));
         let emit = with_common(include_str!("shaders/emit.wgsl"));
         let pipelines = Pipelines {
+            field: int64
+                .then(|| pipeline("field.wgsl", include_str!("shaders/field.wgsl"), "main")),
             classify: pipeline("classify.wgsl", &classify, "main"),
             scan: pipeline("scan.wgsl", scan, "scan_blocks"),
             add: pipeline("scan.wgsl", scan, "add_block_sums"),
@@ -607,8 +713,10 @@ impl GpuExtractor {
             trouble,
             broken: None,
             cpu: McWorkspace::new(),
+            pool: LeafPool::default(),
             gather: Vec::new(),
             records: Vec::new(),
+            ends: Vec::new(),
             map: Vec::new(),
             seam: HashMap::new(),
             #[cfg(test)]
@@ -652,12 +760,62 @@ impl GpuExtractor {
         geom: &GridGeom,
         out: &mut TileMesh,
     ) -> Result<GpuStats> {
+        self.extract_from(Source::Dense(values), dims, origin_node, iso, geom, out)
+    }
+
+    /// Extract the iso-surface of a blended field ([`Blend`]) into `out`, building the field
+    /// on the device from the leaf grids, which stay resident from tile to tile: the mesh
+    /// [`McWorkspace::extract`] gives on [`Blend::eval`], bit for bit. A tile whose leaves do
+    /// not fit the device's buffers is blended on the host and uploaded; a GPU failure sends
+    /// it to the CPU (logged, [`GpuStats::fell_back`]).
+    ///
+    /// Errors: [`Error::Internal`] for inconsistent tables ([`Blend::validate`]), and those of
+    /// [`McWorkspace::extract`].
+    pub fn extract_blend(
+        &mut self,
+        blend: &Blend<'_>,
+        iso: f32,
+        geom: &GridGeom,
+        out: &mut TileMesh,
+    ) -> Result<GpuStats> {
+        blend
+            .validate()
+            .map_err(|e| Error::Internal(format!("blended tile at {:?}: {e}", blend.lo)))?;
+        let origin = blend.lo.map(|v| v as u64);
+        self.extract_from(Source::Blend(blend), blend.dims, origin, iso, geom, out)
+    }
+
+    /// Forget the resident leaf grids: call it before reusing leaf ids for other data.
+    pub fn forget_leaves(&mut self) {
+        self.pool = LeafPool::default();
+    }
+
+    fn extract_from(
+        &mut self,
+        src: Source<'_>,
+        dims: [usize; 3],
+        origin_node: [u64; 3],
+        iso: f32,
+        geom: &GridGeom,
+        out: &mut TileMesh,
+    ) -> Result<GpuStats> {
         out.clear();
-        if !gpu_applicable(values, dims, origin_node, geom) {
+        fn host_values<'a>(src: Source<'a>) -> std::borrow::Cow<'a, [f32]> {
+            match src {
+                Source::Dense(v) => std::borrow::Cow::Borrowed(v),
+                Source::Blend(b) => std::borrow::Cow::Owned(b.eval()),
+            }
+        }
+        let nodes = match src {
+            Source::Dense(v) => v.len(),
+            Source::Blend(b) => b.nodes(),
+        };
+        if !gpu_applicable(nodes, dims, origin_node, geom) {
             // Bad shapes give the CPU kernel's errors; blocks without cells its empty mesh.
+            let values = host_values(src);
             let s = self
                 .cpu
-                .extract(values, dims, origin_node, iso, geom, out)?;
+                .extract(&values, dims, origin_node, iso, geom, out)?;
             return Ok(GpuStats {
                 cells: s.cells,
                 active_cells: s.active_cells,
@@ -677,7 +835,7 @@ impl GpuExtractor {
             log::debug!("tile at node {origin_node:?} on the CPU: the GPU is unusable ({why})");
         } else {
             let run = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                self.try_extract(values, dims, origin_node, iso, geom, out)
+                self.try_extract(src, dims, origin_node, iso, geom, out)
             }));
             let reason = match run {
                 Ok(Ok(stats)) => return Ok(stats),
@@ -707,9 +865,10 @@ impl GpuExtractor {
                 self.info.name
             );
         }
+        let values = host_values(src);
         let s = self
             .cpu
-            .extract(values, dims, origin_node, iso, geom, out)?;
+            .extract(&values, dims, origin_node, iso, geom, out)?;
         Ok(GpuStats {
             cells: s.cells,
             active_cells: s.active_cells,
@@ -718,9 +877,138 @@ impl GpuExtractor {
         })
     }
 
+    /// Make a blended tile's leaf grids resident and upload its tables. The parameter words
+    /// of `field.wgsl` from `lox` on; `None` when its leaves do not fit the pool.
+    fn prepare_blend(
+        &mut self,
+        b: &Blend<'_>,
+        stats: &mut GpuStats,
+    ) -> GpuResult<Option<[u32; 20]>> {
+        use wgpu::BufferUsages as U;
+        if self.pipelines.field.is_none() {
+            return Ok(None);
+        }
+        let dm = b.dm();
+        let slot_words = dm * dm * dm;
+        let slot_bytes = 4 * slot_words as u64;
+        let max_slots = (self.max_bytes / slot_bytes) as usize;
+        let (e, ov) = (b.e, b.ov);
+        let cells = |a: usize| {
+            (
+                leaf_cells(b.lo[a], e, ov, dm as i64).0,
+                leaf_cells(b.lo[a] + b.dims[a] as i64 - 1, e, ov, dm as i64).1,
+            )
+        };
+        let [(x0, x1), (y0, y1), (z0, z1)] = [cells(0), cells(1), cells(2)];
+        let box_dims = [x1 - x0 + 1, y1 - y0 + 1, z1 - z0 + 1].map(|v| v as usize);
+        let within = |c: [i64; 3]| {
+            (x0..=x1).contains(&c[0]) && (y0..=y1).contains(&c[1]) && (z0..=z1).contains(&c[2])
+        };
+        let leaves: Vec<_> = b.leaves.iter().filter(|l| within(l.cell)).collect();
+        if leaves.len() > max_slots {
+            return Ok(None);
+        }
+        let pool = &mut self.pool;
+        if pool.dm != dm || pool.slots < leaves.len() || pool.buf.is_none() {
+            let slots = (2 * leaves.len()).max(64).min(max_slots);
+            *pool = LeafPool {
+                buf: Some(self.device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some("leaf grids"),
+                    size: slots as u64 * slot_bytes,
+                    usage: U::STORAGE | U::COPY_DST,
+                    mapped_at_creation: false,
+                })),
+                dm,
+                slots,
+                slot_of: HashMap::new(),
+                key_of: vec![None; slots],
+                used: vec![0; slots],
+                clock: 0,
+            };
+        }
+        pool.clock += 1;
+        let buf = pool.buf.clone().ok_or("no leaf pool")?;
+        let mut table = vec![NO_LEAF; box_dims.iter().product()];
+        for l in leaves {
+            let slot = match pool.slot_of.get(&l.id) {
+                Some(&s) => s,
+                None => {
+                    // A free slot, else the least recently used one not used by this tile.
+                    let s = (0..pool.slots)
+                        .filter(|&s| pool.used[s] < pool.clock)
+                        .min_by_key(|&s| (pool.key_of[s].is_some(), pool.used[s]))
+                        .ok_or("the leaf pool is full")?;
+                    if let Some(old) = pool.key_of[s].replace(l.id) {
+                        pool.slot_of.remove(&old);
+                    }
+                    pool.slot_of.insert(l.id, s);
+                    self.queue.write_buffer(
+                        &buf,
+                        s as u64 * slot_bytes,
+                        bytemuck::cast_slice(l.detail),
+                    );
+                    stats.upload_bytes += slot_bytes;
+                    s
+                }
+            };
+            pool.used[slot] = pool.clock;
+            let c = [l.cell[0] - x0, l.cell[1] - y0, l.cell[2] - z0].map(|v| v as usize);
+            table[(c[2] * box_dims[1] + c[1]) * box_dims[0] + c[0]] = slot as u32;
+        }
+        let mut axes: Vec<[u32; 4]> = Vec::with_capacity(b.dims.iter().sum());
+        for ax in &b.axes {
+            for i in 0..ax.c0.len() {
+                axes.push([ax.c0[i], ax.w0[i] as u32, ax.w1[i] as u32, 0]);
+            }
+        }
+        let cap = self.device_max_bytes;
+        let dev = self.device.clone();
+        let bufs = &mut self.bufs;
+        let usage = U::STORAGE | U::COPY_DST;
+        let uploads: [(&mut Option<wgpu::Buffer>, &str, &[u8]); 4] = [
+            (&mut bufs.axes, "axis tables", bytemuck::cast_slice(&axes)),
+            (
+                &mut bufs.coarse,
+                "coarse values",
+                bytemuck::cast_slice(&b.coarse),
+            ),
+            (&mut bufs.own, "bump weights", bytemuck::cast_slice(&b.own)),
+            (&mut bufs.slots, "leaf lookup", bytemuck::cast_slice(&table)),
+        ];
+        for (slot, label, bytes) in uploads {
+            let buf = ensure(&dev, slot, label, bytes.len() as u64, usage, cap);
+            self.queue.write_buffer(&buf, 0, bytes);
+            stats.upload_bytes += bytes.len() as u64;
+        }
+        let lo = b.lo.map(|v| v as i32 as u32);
+        let i = |v: i64| v as i32 as u32;
+        Ok(Some([
+            lo[0],
+            lo[1],
+            lo[2],
+            i(e),
+            i(ov),
+            dm as u32,
+            i(x0),
+            i(y0),
+            i(z0),
+            box_dims[0] as u32,
+            box_dims[1] as u32,
+            box_dims[2] as u32,
+            b.coarse_dims[0] as u32,
+            b.coarse_dims[1] as u32,
+            b.dims[0] as u32,
+            (b.dims[0] + b.dims[1]) as u32,
+            b.unit.to_bits(),
+            b.coarse_shift(),
+            0,
+            0,
+        ]))
+    }
+
     fn try_extract(
         &mut self,
-        values: &[f32],
+        src: Source<'_>,
         dims: [usize; 3],
         origin_node: [u64; 3],
         iso: f32,
@@ -732,14 +1020,41 @@ impl GpuExtractor {
             cells: dims.iter().map(|&d| d as u64 - 1).product(),
             ..GpuStats::default()
         };
+        // A blended tile: on the device when its leaves fit, else blended here.
+        let mut blended = None;
+        let mut tile_words = None;
+        let values: &[f32] = match src {
+            Source::Dense(v) => v,
+            Source::Blend(b) => {
+                let t0 = Instant::now();
+                tile_words = self.prepare_blend(b, &mut stats)?;
+                stats.upload_secs += t0.elapsed().as_secs_f64();
+                if tile_words.is_none() {
+                    log::debug!(
+                        "tile at node {origin_node:?} blended on the host: {}",
+                        if self.pipelines.field.is_none() {
+                            "the device has no 64-bit integers in shaders"
+                        } else {
+                            "its leaves exceed the device's buffers"
+                        }
+                    );
+                    blended.insert(b.eval())
+                } else {
+                    stats.field_on_gpu = true;
+                    &[]
+                }
+            }
+        };
         let key = iso_key(iso);
         let l = dims[0] * dims[1];
         self.seam.clear();
         let mut todo: VecDeque<SubBlock> = plan(dims, self.max_bytes)?.into();
         while let Some(b) = todo.pop_front() {
             let mut gather = std::mem::take(&mut self.gather);
-            let block_values = if b.dims[0] == dims[0] && b.dims[1] == dims[1] {
-                &values[b.at[2] * l..(b.at[2] + b.dims[2]) * l]
+            let block_values = if let Some(w) = &tile_words {
+                BlockValues::Device(b.at, w)
+            } else if b.dims[0] == dims[0] && b.dims[1] == dims[1] {
+                BlockValues::Host(&values[b.at[2] * l..(b.at[2] + b.dims[2]) * l])
             } else {
                 gather.clear();
                 for z in b.at[2]..b.at[2] + b.dims[2] {
@@ -748,7 +1063,7 @@ impl GpuExtractor {
                         gather.extend_from_slice(&values[r..r + b.dims[0]]);
                     }
                 }
-                &gather[..]
+                BlockValues::Host(&gather[..])
             };
             let seam_mask = b.seam_mask(dims);
             let tri_start = out.triangles.len();
@@ -771,7 +1086,18 @@ impl GpuExtractor {
             }
             stats.sub_blocks += 1;
             let t0 = Instant::now();
-            self.assemble(values, dims, origin_node, iso, geom, b, out, tri_start)?;
+            let ends = std::mem::take(&mut self.ends);
+            let at = Assembly {
+                values,
+                ends: tile_words.is_some().then_some(&ends[..]),
+                dims,
+                origin_node,
+                iso,
+                block: b,
+            };
+            let r = self.assemble(at, geom, out, tri_start);
+            self.ends = ends;
+            r?;
             stats.host_secs += t0.elapsed().as_secs_f64();
         }
         Ok(stats)
@@ -780,18 +1106,21 @@ impl GpuExtractor {
     /// Add the vertices of sub-block `b` (records in `self.records`) to `out`, matching seam
     /// edges to the vertices earlier sub-blocks made, and turn its triangles
     /// (`out.triangles[tri_start..]`, record indices) into vertex indices.
-    #[allow(clippy::too_many_arguments)]
     fn assemble(
         &mut self,
-        values: &[f32],
-        dims: [usize; 3],
-        origin_node: [u64; 3],
-        iso: f32,
+        at: Assembly<'_>,
         geom: &GridGeom,
-        b: SubBlock,
         out: &mut TileMesh,
         tri_start: usize,
     ) -> GpuResult<()> {
+        let Assembly {
+            values,
+            ends,
+            dims,
+            origin_node,
+            iso,
+            block: b,
+        } = at;
         let n_records = self.records.len();
         let base = out.keys.len();
         if base + n_records >= u32::MAX as usize {
@@ -843,28 +1172,29 @@ impl GpuExtractor {
             std::mem::take(&mut out.keys),
             std::mem::take(&mut out.positions),
         );
-        let vertex = |&r: &u32| {
-            let Some((p, axis)) = decode(r & !SEAM) else {
+        let vertex = |j: usize| {
+            let Some((p, axis)) = decode(fresh[j] & !SEAM) else {
                 bad.store(true, Ordering::Relaxed);
                 return (EdgeKey(0), [0.0; 3]);
             };
-            let a = tile_index(p);
+            let (va, vb) = match ends {
+                Some(e) => (f32::from_bits(e[j][0]), f32::from_bits(e[j][1])),
+                None => {
+                    let a = tile_index(p);
+                    (values[a], values[a + stride[axis]])
+                }
+            };
             let g = [0, 1, 2].map(|d| origin_node[d] + p[d] as u64);
             (
                 geom.edge_key(g, axis as u8),
-                cpu::edge_vertex(geom, g, axis, values[a], values[a + stride[axis]], iso64),
+                cpu::edge_vertex(geom, g, axis, va, vb, iso64),
             )
         };
+        let all = (0..fresh.len()).into_par_iter().with_min_len(1 << 12);
         if matched.is_empty() {
-            both.par_extend(fresh.par_iter().with_min_len(1 << 12).map(vertex));
+            both.par_extend(all.map(vertex));
         } else {
-            both.par_extend(
-                fresh
-                    .par_iter()
-                    .with_min_len(1 << 12)
-                    .filter(|&&r| r != MATCHED)
-                    .map(vertex),
-            );
+            both.par_extend(all.filter(|&j| fresh[j] != MATCHED).map(vertex));
         }
         (out.keys, out.positions) = both;
         if bad.load(Ordering::Relaxed) {
@@ -917,7 +1247,7 @@ impl GpuExtractor {
     /// `self.records` and appends its triangles (record indices) to `tris`.
     fn run_block(
         &mut self,
-        values: &[f32],
+        values: BlockValues<'_>,
         dims: [usize; 3],
         iso_key: u32,
         seam_mask: u32,
@@ -997,7 +1327,7 @@ impl GpuExtractor {
 
     fn run_block_scoped(
         &mut self,
-        values: &[f32],
+        values: BlockValues<'_>,
         dims: [usize; 3],
         iso_key: u32,
         seam_mask: u32,
@@ -1026,8 +1356,6 @@ impl GpuExtractor {
             });
         }
 
-        // Upload.
-        let t0 = Instant::now();
         let values_buf = ensure(
             &dev,
             &mut b.values,
@@ -1036,32 +1364,37 @@ impl GpuExtractor {
             U::STORAGE | U::COPY_DST,
             cap,
         );
-        let bytes: &[u8] = bytemuck::cast_slice(values);
-        let len = bytes.len() as u64;
-        let write_usage = U::MAP_WRITE | U::COPY_SRC;
-        let upload = ensure(&dev, &mut b.upload, "values upload", len, write_usage, cap);
-        let (tx, rx) = mpsc::channel();
-        upload.map_async(wgpu::MapMode::Write, 0..len, move |r| {
-            let _ = tx.send(r);
-        });
-        self.wait()?;
-        match rx.try_recv() {
-            Ok(Ok(())) => {}
-            Ok(Err(e)) => return Err(format!("mapping the upload buffer: {e}")),
-            Err(_) => return Err("the upload buffer was not mapped".to_string()),
+        if let BlockValues::Host(values) = values {
+            // Upload through a staging buffer filled on all cores.
+            let t0 = Instant::now();
+            let bytes: &[u8] = bytemuck::cast_slice(values);
+            let len = bytes.len() as u64;
+            let write_usage = U::MAP_WRITE | U::COPY_SRC;
+            let upload = ensure(&dev, &mut b.upload, "values upload", len, write_usage, cap);
+            let (tx, rx) = mpsc::channel();
+            upload.map_async(wgpu::MapMode::Write, 0..len, move |r| {
+                let _ = tx.send(r);
+            });
+            self.wait()?;
+            match rx.try_recv() {
+                Ok(Ok(())) => {}
+                Ok(Err(e)) => return Err(format!("mapping the upload buffer: {e}")),
+                Err(_) => return Err("the upload buffer was not mapped".to_string()),
+            }
+            {
+                let mut view = upload
+                    .get_mapped_range_mut(0..len)
+                    .map_err(|e| format!("writing the upload buffer: {e}"))?;
+                copy_parallel(view.slice(..), bytes);
+            }
+            upload.unmap();
+            let mut enc = dev.create_command_encoder(&Default::default());
+            enc.copy_buffer_to_buffer(&upload, 0, &values_buf, 0, len);
+            self.queue.submit([enc.finish()]);
+            self.wait()?;
+            stats.upload_secs += t0.elapsed().as_secs_f64();
+            stats.upload_bytes += len;
         }
-        {
-            let mut view = upload
-                .get_mapped_range_mut(0..len)
-                .map_err(|e| format!("writing the upload buffer: {e}"))?;
-            copy_parallel(view.slice(..), bytes);
-        }
-        upload.unmap();
-        let mut enc = dev.create_command_encoder(&Default::default());
-        enc.copy_buffer_to_buffer(&upload, 0, &values_buf, 0, len);
-        self.queue.submit([enc.finish()]);
-        self.wait()?;
-        stats.upload_secs += t0.elapsed().as_secs_f64();
 
         // Passes 1 and 2: classify, scan; read back the totals.
         let t0 = Instant::now();
@@ -1144,9 +1477,48 @@ impl GpuExtractor {
             let add = bind(&p.add, &[&prm, data, sums]);
             scans.push((g, scan, add));
         }
+        let field = match values {
+            BlockValues::Device(at, words) => {
+                let mut w = vec![
+                    dims[0] as u32,
+                    dims[1] as u32,
+                    dims[2] as u32,
+                    n as u32,
+                    node_grid.0,
+                    at[0] as u32,
+                    at[1] as u32,
+                    at[2] as u32,
+                ];
+                w.extend_from_slice(words);
+                let prm = uniform(&w);
+                let b = &self.bufs;
+                let need = |o: &Option<wgpu::Buffer>| o.clone().ok_or("blend tables missing");
+                let pool = self.pool.buf.clone().ok_or("no leaf pool")?;
+                let (axes, coarse, own, slots) = (
+                    need(&b.axes)?,
+                    need(&b.coarse)?,
+                    need(&b.own)?,
+                    need(&b.slots)?,
+                );
+                let pipeline = p.field.as_ref().ok_or("no field pipeline")?;
+                Some((
+                    pipeline,
+                    bind(
+                        pipeline,
+                        &[&prm, &axes, &coarse, &own, &slots, &pool, &values_buf],
+                    ),
+                ))
+            }
+            BlockValues::Host(_) => None,
+        };
         let mut enc = dev.create_command_encoder(&Default::default());
         {
             let mut pass = enc.begin_compute_pass(&Default::default());
+            if let Some((pipeline, field)) = &field {
+                pass.set_pipeline(pipeline);
+                pass.set_bind_group(0, field, &[]);
+                pass.dispatch_workgroups(node_grid.0, node_grid.1, 1);
+            }
             pass.set_pipeline(&p.classify);
             pass.set_bind_group(0, &classify, &[]);
             pass.dispatch_workgroups(node_grid.0, node_grid.1, 1);
@@ -1202,6 +1574,14 @@ impl GpuExtractor {
             out_usage,
             cap,
         );
+        let ends = ensure(
+            &dev,
+            &mut b.ends,
+            "edge ends",
+            8 * n_vertices,
+            out_usage,
+            cap,
+        );
         let tris = ensure(&dev, &mut b.tris, "triangles", 12 * n_tris, out_usage, cap);
         let records_read = ensure(
             &dev,
@@ -1225,7 +1605,15 @@ impl GpuExtractor {
         let cell_params = block_params(n_active, cell_grid.0);
         let vertices = bind(
             &p.vertices,
-            &[&cell_params, &counts, &cells_buf, &self.tables, &records],
+            &[
+                &cell_params,
+                &counts,
+                &cells_buf,
+                &self.tables,
+                &records,
+                &values_buf,
+                &ends,
+            ],
         );
         let triangles = bind(
             &p.triangles,
@@ -1250,8 +1638,22 @@ impl GpuExtractor {
 
         // Read back the compacted outputs only.
         let t0 = Instant::now();
+        let device_values = matches!(values, BlockValues::Device(..));
+        let ends_read = device_values.then(|| {
+            ensure(
+                &dev,
+                &mut self.bufs.ends_read,
+                "edge ends read-back",
+                8 * n_vertices,
+                read_usage,
+                cap,
+            )
+        });
         let mut enc = dev.create_command_encoder(&Default::default());
         enc.copy_buffer_to_buffer(&records, 0, &records_read, 0, 4 * n_vertices);
+        if let Some(er) = &ends_read {
+            enc.copy_buffer_to_buffer(&ends, 0, er, 0, 8 * n_vertices);
+        }
         if n_tris > 0 {
             enc.copy_buffer_to_buffer(&tris, 0, &tris_read, 0, 12 * n_tris);
         }
@@ -1260,6 +1662,13 @@ impl GpuExtractor {
         let r = self.read(&records_read, 4 * n_vertices, &mut recs);
         self.records = recs;
         r?;
+        self.ends.clear();
+        if let Some(er) = &ends_read {
+            let mut e = std::mem::take(&mut self.ends);
+            let r = self.read(er, 8 * n_vertices, &mut e);
+            self.ends = e;
+            r?;
+        }
         self.read(&tris_read, 12 * n_tris, out_tris)?;
         stats.download_secs += t0.elapsed().as_secs_f64();
         Ok(BlockOutcome::Done)
@@ -1268,16 +1677,11 @@ impl GpuExtractor {
 
 /// True when [`McWorkspace::extract`] would accept the block and it has cells: the GPU path
 /// handles exactly these.
-fn gpu_applicable(
-    values: &[f32],
-    dims: [usize; 3],
-    origin_node: [u64; 3],
-    geom: &GridGeom,
-) -> bool {
+fn gpu_applicable(nodes: usize, dims: [usize; 3], origin_node: [u64; 3], geom: &GridGeom) -> bool {
     let total = dims[0]
         .checked_mul(dims[1])
         .and_then(|v| v.checked_mul(dims[2]));
-    total == Some(values.len())
+    total == Some(nodes)
         && geom.n <= GridGeom::MAX_N
         && (0..3).all(|d| {
             origin_node[d]
@@ -1285,7 +1689,7 @@ fn gpu_applicable(
                 .is_some_and(|l| l - 1 <= geom.n)
         })
         && dims.iter().all(|&d| d >= 2)
-        && values.len().saturating_mul(3) < u32::MAX as usize
+        && nodes.saturating_mul(3) < u32::MAX as usize
 }
 
 #[cfg(test)]
@@ -1375,6 +1779,91 @@ mod tests {
             "{dims:?} iso {iso}: triangles"
         );
         gs
+    }
+
+    /// The GPU mesh of a blended tile is the CPU mesh of its field, [`Blend::eval`].
+    fn assert_same_blend(g: &mut GpuExtractor, b: &Blend, iso: f32, geom: &GridGeom) -> GpuStats {
+        let values = b.eval();
+        let origin = b.lo.map(|v| v as u64);
+        let mut want = TileMesh::default();
+        McWorkspace::new()
+            .extract(&values, b.dims, origin, iso, geom, &mut want)
+            .unwrap();
+        let mut got = TileMesh::default();
+        let gs = g.extract_blend(b, iso, geom, &mut got).unwrap();
+        assert!(!gs.fell_back, "{:?}: fell back to the CPU", b.dims);
+        assert!(!want.triangles.is_empty(), "a test tile without surface");
+        assert_eq!(got.keys, want.keys, "{:?} at {:?}: keys", b.dims, b.lo);
+        let bits = |m: &TileMesh| -> Vec<[u64; 3]> {
+            m.positions.iter().map(|p| p.map(f64::to_bits)).collect()
+        };
+        assert!(bits(&got) == bits(&want), "{:?}: positions", b.dims);
+        assert_eq!(got.triangles, want.triangles, "{:?}: triangles", b.dims);
+        gs
+    }
+
+    #[test]
+    fn blended_fields_match_the_cpu() {
+        use crate::extract::field::tests::RandomBlend;
+        let Some(mut g) = gpu() else { return };
+        let geom = GridGeom::new([0.0, 0.0, 0.0], 0.01, 1024).unwrap();
+        for (seed, lo, dims, e, fill) in [
+            (1, [0, 0, 0], [33, 33, 33], 32, 0.7),
+            (2, [64, 32, 96], [65, 17, 40], 32, 0.5),
+            (3, [40, 8, 0], [20, 30, 50], 16, 1.0),
+            (4, [8, 16, 24], [9, 9, 9], 8, 0.3),
+        ] {
+            let rb = RandomBlend::new(seed, lo, dims, e, fill);
+            // Each random blend names its leaves 0, 1, ...
+            g.forget_leaves();
+            for iso in [0.0, 0.3] {
+                let s = assert_same_blend(&mut g, &rb.blend(), iso, &geom);
+                assert!(s.field_on_gpu, "seed {seed}: blended on the host");
+            }
+        }
+    }
+
+    #[test]
+    fn resident_leaves_are_not_sent_again() {
+        use crate::extract::field::tests::RandomBlend;
+        let Some(mut g) = gpu() else { return };
+        let geom = GridGeom::new([0.0, 0.0, 0.0], 0.01, 1024).unwrap();
+        let rb = RandomBlend::new(9, [32, 32, 32], [33, 33, 33], 32, 1.0);
+        let b = rb.blend();
+        let first = assert_same_blend(&mut g, &b, 0.0, &geom);
+        let again = assert_same_blend(&mut g, &b, 0.1, &geom);
+        let slot = 4 * (b.dm() as u64).pow(3);
+        assert!(
+            first.upload_bytes >= 8 * slot,
+            "{} bytes",
+            first.upload_bytes
+        );
+        assert!(
+            again.upload_bytes < slot,
+            "{} bytes sent again",
+            again.upload_bytes
+        );
+        // Other data under the same ids needs forget_leaves.
+        g.forget_leaves();
+        let other = RandomBlend::new(10, [32, 32, 32], [33, 33, 33], 32, 1.0);
+        assert_same_blend(&mut g, &other.blend(), 0.0, &geom);
+    }
+
+    #[test]
+    fn blended_sub_blocks_and_host_blending_give_the_same_mesh() {
+        use crate::extract::field::tests::RandomBlend;
+        let Some(mut g) = gpu() else { return };
+        let geom = GridGeom::new([0.0, 0.0, 0.0], 0.01, 1024).unwrap();
+        let rb = RandomBlend::new(12, [16, 8, 0], [33, 17, 41], 8, 0.1);
+        let b = rb.blend();
+        // Several slabs, the leaves on the device.
+        g.set_max_buffer_bytes(200_000);
+        let s = assert_same_blend(&mut g, &b, 0.0, &geom);
+        assert!(s.sub_blocks > 1 && s.field_on_gpu, "{s:?}");
+        // Too small a pool for the tile's leaves: blended on the host, same mesh.
+        g.set_max_buffer_bytes(4 * 13 * 13 * 13);
+        let s = assert_same_blend(&mut g, &b, 0.0, &geom);
+        assert!(!s.field_on_gpu, "{s:?}");
     }
 
     #[test]

@@ -47,6 +47,7 @@
 //!   order, so output bytes do not depend on thread timing.
 
 pub mod cpu;
+pub mod field;
 pub mod gpu;
 pub mod tables;
 pub mod weld;

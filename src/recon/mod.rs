@@ -17,7 +17,9 @@
 //!    are spilled to the work directory (zstd) and are the checkpoint a resumed run reuses.
 //! 3. The field at a fine node is the upsampled coarse solution plus the details blended by
 //!    partition of unity ([`pou`]). Regions no leaf covers (holes, the unseen bottom of a scan)
-//!    take the coarse solution, which closes them.
+//!    take the coarse solution, which closes them. The blend is exact fixed-point arithmetic
+//!    ([`crate::extract::field`]), done on the CPU or, with `--gpu`, on the device from the
+//!    leaf grids; both give the same bits.
 //! 4. The iso-value is the mean of the field at the input samples (each leaf sums its own
 //!    cell's samples). With outward normals the field is lower inside.
 //!
@@ -35,7 +37,7 @@ pub mod pou;
 use std::collections::{BTreeSet, HashMap, VecDeque};
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
 use rayon::prelude::*;
@@ -44,12 +46,12 @@ use serde::{Deserialize, Serialize};
 use crate::error::{Error, IoContext, Result};
 use crate::exec::Ctx;
 use crate::extract::cpu::{GridGeom, TileMesh, marching_cubes};
+use crate::extract::field::{Axis, Blend, Leaf, quantise, unit_for};
 use crate::extract::weld::Welder;
 use crate::io::mesh_write::MeshPlyWriter;
 use crate::store::Store;
 use crate::types::{Aabb, CellKey, Cube, PointBatch, morton3};
 use fft_solve::LocalGrid;
-use pou::Bump;
 
 /// Peak bytes per node of a solve: the splatted normals (12) and the divergence (4).
 const COARSE_BYTES_PER_NODE: u64 = 16;
@@ -94,8 +96,9 @@ pub struct ReconParams {
     pub min_points: u64,
     /// Leave the surface open where no input point is within two coarse voxels.
     pub trim: bool,
-    /// Marching cubes on the GPU: auto (a real GPU when there is one), on, off (the default:
-    /// the GPU path is not yet faster end to end, see `extract::gpu`).
+    /// Tile fields and marching cubes on the GPU: auto (a real GPU when there is one), on,
+    /// off (the default: the GPU path is not yet measured faster end to end, see
+    /// `extract::gpu`).
     pub gpu: crate::extract::gpu::GpuMode,
     /// Move each vertex onto the plane of its nearest input points (see [`FIT_NEIGHBOURS`]).
     pub fit: bool,
@@ -303,32 +306,48 @@ pub struct CoarseField {
 }
 
 impl CoarseField {
-    /// Value at fine node `g` (trilinear between coarse nodes; exact at `g = rJ`).
-    #[inline]
-    pub fn at_fine_node(&self, g: [i64; 3]) -> f32 {
+    /// What a block of `dims` fine nodes from node `lo` reads of the coarse solution, for
+    /// [`Blend`]: the coarse nodes around it in fixed point (`unit`; indices clamped to the
+    /// grid), per-axis trilinear tables, and `log2 r`.
+    fn block(
+        &self,
+        lo: [i64; 3],
+        dims: [usize; 3],
+        unit: f32,
+    ) -> (Vec<i32>, [usize; 3], [Axis; 3]) {
         let n = self.grid.n as i64;
-        let mut i0 = [0i64; 3];
-        let mut f = [0f32; 3];
+        let r = self.r;
+        let mut axes: [Axis; 3] = Default::default();
+        let mut first = [0i64; 3];
+        let mut cdims = [0usize; 3];
         for a in 0..3 {
-            let u = g[a] + self.pad * self.r;
-            i0[a] = u.div_euclid(self.r);
-            f[a] = u.rem_euclid(self.r) as f32 / self.r as f32;
-        }
-        let at = |x: i64, y: i64, z: i64| {
-            let w = |c: i64| c.clamp(0, n - 1) as usize;
-            self.values[(w(z) * self.grid.n + w(y)) * self.grid.n + w(x)]
-        };
-        let mut acc = 0.0;
-        for c in 0..8 {
-            let (dx, dy, dz) = (c & 1, (c >> 1) & 1, (c >> 2) & 1);
-            let w = (if dx == 1 { f[0] } else { 1.0 - f[0] })
-                * (if dy == 1 { f[1] } else { 1.0 - f[1] })
-                * (if dz == 1 { f[2] } else { 1.0 - f[2] });
-            if w != 0.0 {
-                acc += w * at(i0[0] + dx, i0[1] + dy, i0[2] + dz);
+            let u0 = lo[a] + self.pad * r;
+            first[a] = u0.div_euclid(r);
+            cdims[a] = ((u0 + dims[a] as i64 - 1).div_euclid(r) + 2 - first[a]) as usize;
+            let ax = &mut axes[a];
+            for p in 0..dims[a] as i64 {
+                let u = u0 + p;
+                ax.c0.push((u.div_euclid(r) - first[a]) as u32);
+                ax.w0.push((r - u.rem_euclid(r)) as i32);
+                ax.w1.push(u.rem_euclid(r) as i32);
             }
         }
-        acc
+        let at = |a: usize, j: usize| (first[a] + j as i64).clamp(0, n - 1) as usize;
+        let mut raw = Vec::with_capacity(cdims.iter().product());
+        for z in 0..cdims[2] {
+            for y in 0..cdims[1] {
+                for x in 0..cdims[0] {
+                    let g = self.grid.n;
+                    raw.push(self.values[(at(2, z) * g + at(1, y)) * g + at(0, x)]);
+                }
+            }
+        }
+        (quantise(&raw, unit), cdims, axes)
+    }
+
+    /// The largest magnitude of a coarse value.
+    fn max_abs(&self) -> f64 {
+        self.values.iter().fold(0f64, |m, v| m.max(v.abs() as f64))
     }
 
     /// Value at a world point.
@@ -898,7 +917,7 @@ fn read_leaf(dir: &Path, key: CellKey, m: usize) -> Result<LeafDetail> {
     })
 }
 
-const TILE_MAGIC: &[u8; 8] = b"SFTILE03";
+const TILE_MAGIC: &[u8; 8] = b"SFTILE04";
 
 fn tile_path(dir: &Path, t: u64) -> PathBuf {
     dir.join(format!("{t:016x}.zst"))
@@ -1214,7 +1233,9 @@ pub fn reconstruct(
     let leaf_set = refined_set;
     let ntiles_axis = plan.n / plan.tile;
     let tiles_total = ntiles_axis.pow(3);
-    let bump = Bump::new(plan.e as i64, plan.ov as i64);
+    let own = pou::leaf_weights(plan.e as i64, plan.ov as i64);
+    // Fixed point for the blend (`extract::field`): the coarse values within 2^21 units.
+    let unit = unit_for(coarse.max_abs());
     let geom = GridGeom {
         origin: plan.cube.origin,
         h: plan.h,
@@ -1232,7 +1253,7 @@ pub fn reconstruct(
     // leaves of the last wave (the next wave's tiles are its neighbours), within a sixth of
     // the budget.
     let detail_cap = ctx.budget.total() / 6;
-    let mut detail_cache = DetailCache::new(&leaves_dir, dm, detail_cap);
+    let mut detail_cache = DetailCache::new(&leaves_dir, dm, unit, detail_cap);
     let _detail_permit = ctx.budget.acquire(detail_cap, "the leaf detail cache")?;
     let tile_nodes = (plan.tile + 1).pow(3);
     let stage = ctx.progress.stage("tiles", Some(tiles_total), "tiles");
@@ -1333,40 +1354,57 @@ pub fn reconstruct(
                 Ok((tt, mesh))
             };
         let meshes: Vec<Result<(u64, TileMesh)>> = match gpu.as_mut() {
-            // GPU: fields built in parallel on the CPU, extracted tile by tile on the device.
+            // GPU: a thread feeds the device tile after tile (fields built there from the leaf
+            // grids) while the pool finishes the tiles it has extracted (fit, colour, trim,
+            // checkpoint).
             Some(g) => {
-                let fields: Vec<Option<Vec<f32>>> = ctx.pool.install(|| {
-                    loaded
-                        .par_iter()
-                        .map(|(_, lo, ds)| {
-                            ds.as_ref()
-                                .map(|ds| tile_field(&plan, &bump, &coarse, *lo, ds))
-                        })
-                        .collect()
-                });
-                let mut out = Vec::with_capacity(loaded.len());
-                for (((tt, lo, _), f), cp) in loaded.iter().zip(fields).zip(&near_pts) {
-                    out.push(match f {
-                        None => read_tile(&tile_path(&tiles_dir, *tt)).map(|m| (*tt, m)),
-                        Some(f) => {
+                type Slot = Mutex<Option<Result<(u64, TileMesh)>>>;
+                let done: Vec<Slot> = loaded.iter().map(|_| Mutex::new(None)).collect();
+                let (tx, rx) = crossbeam_channel::bounded::<(usize, Result<TileMesh>)>(2);
+                let pool = &ctx.pool;
+                std::thread::scope(|s| -> Result<()> {
+                    let (loaded, plan, own, coarse) = (&loaded, &plan, &own, &coarse);
+                    s.spawn(move || {
+                        for (i, (_, lo, ds)) in loaded.iter().enumerate() {
+                            let Some(ds) = ds else { continue };
+                            let b = tile_blend(plan, own, coarse, unit, *lo, ds);
                             let mut mesh = TileMesh::default();
                             // The host side of the GPU call uses rayon: keep it on our pool.
-                            ctx.pool
-                                .install(|| {
-                                    g.extract(
-                                        &f,
-                                        dims,
-                                        lo.map(|v| v as u64),
-                                        iso as f32,
-                                        &geom,
-                                        &mut mesh,
-                                    )
-                                })
-                                .and_then(|_| ctx.pool.install(|| finish(*tt, mesh, cp)))
+                            let r = pool
+                                .install(|| g.extract_blend(&b, iso as f32, &geom, &mut mesh))
+                                .map(|_| mesh);
+                            if tx.send((i, r)).is_err() {
+                                break;
+                            }
                         }
                     });
-                }
-                out
+                    for (i, (tt, _, ds)) in loaded.iter().enumerate() {
+                        if let (None, Ok(mut d)) = (ds, done[i].lock()) {
+                            *d = Some(read_tile(&tile_path(&tiles_dir, *tt)).map(|m| (*tt, m)));
+                        }
+                    }
+                    pool.in_place_scope(|sc| {
+                        for (i, r) in rx {
+                            let (done, finish, near_pts, loaded) =
+                                (&done, &finish, &near_pts, &loaded);
+                            sc.spawn(move |_| {
+                                let tt = loaded[i].0;
+                                let r = r.and_then(|m| finish(tt, m, &near_pts[i]));
+                                if let Ok(mut d) = done[i].lock() {
+                                    *d = Some(r);
+                                }
+                            });
+                        }
+                    });
+                    Ok(())
+                })?;
+                done.into_iter()
+                    .map(|d| {
+                        d.into_inner().ok().flatten().unwrap_or_else(|| {
+                            Err(Error::Internal("a tile was not extracted".into()))
+                        })
+                    })
+                    .collect()
             }
             None => ctx.pool.install(|| {
                 loaded
@@ -1376,7 +1414,7 @@ pub fn reconstruct(
                         let Some(ds) = ds else {
                             return Ok((*tt, read_tile(&tile_path(&tiles_dir, *tt))?));
                         };
-                        let f = tile_field(&plan, &bump, &coarse, *lo, ds);
+                        let f = tile_blend(&plan, &own, &coarse, unit, *lo, ds).eval();
                         let mut mesh = TileMesh::default();
                         marching_cubes(
                             &f,
@@ -1577,79 +1615,59 @@ fn leaves_near(
     out
 }
 
-/// The blended field on a tile's `(T+1)³` nodes starting at fine node `lo`.
-fn tile_field(
+/// A tile's `(T+1)³` nodes from fine node `lo` as a blend ([`Blend`]) of the coarse solution
+/// and the leaf details `details` (fixed point in `unit`), with per-axis leaf weights `own`
+/// ([`pou::leaf_weights`]). [`Blend::eval`] or the GPU evaluates it.
+fn tile_blend<'a>(
     plan: &Plan,
-    bump: &Bump,
+    own: &[i32],
     coarse: &CoarseField,
+    unit: f32,
     lo: [i64; 3],
-    details: &[(CellKey, Arc<Vec<f32>>)],
-) -> Vec<f32> {
-    let t = plan.tile as i64 + 1;
-    let tn = t as usize;
-    let mut acc = vec![0f32; tn * tn * tn];
-    let dm = plan.detail_n() as i64;
-    let ov = plan.ov as i64;
-    for (k, d) in details {
-        let base = plan.leaf_node(*k);
-        // Detail node s <-> global node base - ov + s; intersect with the tile.
-        let s0 = [0, 1, 2].map(|a| (lo[a] - (base[a] - ov)).max(0));
-        let s1 = [0, 1, 2].map(|a| (lo[a] + t - 1 - (base[a] - ov)).min(dm - 1));
-        if (0..3).any(|a| s0[a] > s1[a]) {
-            continue;
-        }
-        let w: [Vec<f32>; 3] =
-            [0, 1, 2].map(|a| (s0[a]..=s1[a]).map(|s| bump.own(s - ov)).collect());
-        for sz in s0[2]..=s1[2] {
-            let wz = w[2][(sz - s0[2]) as usize];
-            let gz = (base[2] - ov + sz - lo[2]) as usize;
-            for sy in s0[1]..=s1[1] {
-                let wzy = wz * w[1][(sy - s0[1]) as usize];
-                if wzy == 0.0 {
-                    continue;
-                }
-                let gy = (base[1] - ov + sy - lo[1]) as usize;
-                let drow = ((sz * dm + sy) * dm) as usize;
-                let arow = (gz * tn + gy) * tn;
-                for sx in s0[0]..=s1[0] {
-                    let gx = (base[0] - ov + sx - lo[0]) as usize;
-                    acc[arow + gx] += wzy * w[0][(sx - s0[0]) as usize] * d[drow + sx as usize];
-                }
-            }
-        }
+    details: &'a [(CellKey, Arc<Vec<i32>>)],
+) -> Blend<'a> {
+    let dims = [(plan.tile + 1) as usize; 3];
+    let (cvals, coarse_dims, axes) = coarse.block(lo, dims, unit);
+    Blend {
+        lo,
+        dims,
+        axes,
+        coarse: cvals,
+        coarse_dims,
+        coarse_bits: plan.r.trailing_zeros(),
+        e: plan.e as i64,
+        ov: plan.ov as i64,
+        own: own.to_vec(),
+        unit,
+        leaves: details
+            .iter()
+            .map(|(k, d)| Leaf {
+                cell: k.decode().1.map(|v| v as i64),
+                id: k.0,
+                detail: d,
+            })
+            .collect(),
     }
-    let mut out = acc;
-    for z in 0..t {
-        let tz = bump.total(lo[2] + z);
-        for y in 0..t {
-            let tzy = tz * bump.total(lo[1] + y);
-            for x in 0..t {
-                let g = [lo[0] + x, lo[1] + y, lo[2] + z];
-                let i = ((z * t + y) * t + x) as usize;
-                let wsum = tzy * bump.total(g[0]);
-                out[i] = coarse.at_fine_node(g) + out[i] / wsum;
-            }
-        }
-    }
-    out
 }
 
 /// Leaf details read back from the work directory, cached up to a byte cap.
 struct DetailCache {
     dir: PathBuf,
     m: usize,
-    map: HashMap<CellKey, Arc<Vec<f32>>>,
+    unit: f32,
+    map: HashMap<CellKey, Arc<Vec<i32>>>,
     lru: VecDeque<CellKey>,
     cap_entries: usize,
     max_entries: usize,
 }
 
 impl DetailCache {
-    fn new(dir: &Path, m: usize, cap_bytes: u64) -> DetailCache {
+    fn new(dir: &Path, m: usize, unit: f32, cap_bytes: u64) -> DetailCache {
         let per = (m * m * m * 4) as u64;
         DetailCache {
             dir: dir.to_path_buf(),
             m,
+            unit,
             map: HashMap::new(),
             lru: VecDeque::new(),
             cap_entries: ((cap_bytes / per.max(1)) as usize).max(64),
@@ -1671,11 +1689,15 @@ impl DetailCache {
         }
     }
 
-    fn get(&mut self, k: CellKey) -> Result<Arc<Vec<f32>>> {
+    /// Leaf `k`'s detail in fixed point.
+    fn get(&mut self, k: CellKey) -> Result<Arc<Vec<i32>>> {
         if let Some(d) = self.map.get(&k) {
             return Ok(Arc::clone(d));
         }
-        let d = Arc::new(read_leaf(&self.dir, k, self.m)?.detail);
+        let d = Arc::new(quantise(
+            &read_leaf(&self.dir, k, self.m)?.detail,
+            self.unit,
+        ));
         self.map.insert(k, Arc::clone(&d));
         self.lru.push_back(k);
         self.evict();

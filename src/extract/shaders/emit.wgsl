@@ -5,7 +5,9 @@
 // counts[i].x on, in the order of tables::case_edges: the block-local edge id 3·node + axis,
 // with bit 31 set when the edge lies on a face shared with another block. Every crossing edge
 // of the block gets exactly one record (Timokhin & Mikhaylyuk 2020: no vertex stored twice),
-// and records come in the CPU kernel's vertex order.
+// and records come in the CPU kernel's vertex order. It also writes the bits of the edge's two
+// node values to ends[at], for tiles whose field was built on the device (field.wgsl): the host
+// computes the position from them with the CPU's formula.
 //
 // `triangles`: the cell writes the triangles of its case, in table order, from triangle
 // counts[i].z on, as indices into the records: the vertex of an edge is found in the edge's
@@ -16,6 +18,9 @@
 @group(0) @binding(2) var<storage, read> cells: array<u32>;
 @group(0) @binding(3) var<storage, read> tables: array<u32>;
 @group(0) @binding(4) var<storage, read_write> out: array<u32>;
+// `vertices` only.
+@group(0) @binding(5) var<storage, read> values: array<u32>;
+@group(0) @binding(6) var<storage, read_write> ends: array<vec2<u32>>;
 
 // Whether the edge from node p along `axis` lies on a face shared with another block.
 fn on_seam(p: vec3<u32>, axis: u32) -> bool {
@@ -47,7 +52,15 @@ fn vertices(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_ind
         if ((fresh & (1u << e)) != 0u) {
             let q = p + edge_offset(e);
             let axis = e / 4u;
-            out[at] = (3u * index(q, blk) + axis) | select(0u, SEAM, on_seam(q, axis));
+            let a = index(q, blk);
+            var step = 1u;
+            if (axis == 1u) {
+                step = blk.sx;
+            } else if (axis == 2u) {
+                step = blk.sx * blk.sy;
+            }
+            out[at] = (3u * a + axis) | select(0u, SEAM, on_seam(q, axis));
+            ends[at] = vec2<u32>(values[a], values[a + step]);
             at += 1u;
         }
     }
