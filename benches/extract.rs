@@ -27,7 +27,7 @@
 use std::time::Instant;
 
 use rayon::prelude::*;
-use scanflow::extract::field::{Axis, Blend, Leaf, pou_weights, quantise, unit_for};
+use scanflow::extract::field::{Axis, Blend, Leaf, quantise, unit_for};
 use scanflow::extract::{GpuExtractor, GpuMode, GpuStats, GridGeom, McWorkspace, TileMesh};
 
 /// A tile of `n + 1` nodes per axis: a sphere of radius `0.4·n` (few active cells) or a
@@ -132,15 +132,7 @@ impl BlendData {
                 (c, quantise(&d, unit))
             })
             .collect();
-        let half = 0.5 * E as f64 + OV as f64;
-        let own = pou_weights(E, OV, |s| {
-            let u = ((s - OV) as f64 - 0.5 * E as f64) / half;
-            if u.abs() >= 1.0 {
-                0.0
-            } else {
-                (1.0 - u * u).powi(2)
-            }
-        });
+        let own = scanflow::recon::pou::leaf_weights(E, OV);
         BlendData {
             coarse: quantise(&coarse, unit),
             cn,
@@ -184,6 +176,17 @@ impl BlendData {
                 .collect(),
         }
     }
+}
+
+/// Same keys, triangles and positions bit for bit.
+fn same_mesh(a: &TileMesh, b: &TileMesh) -> bool {
+    a.keys == b.keys
+        && a.triangles == b.triangles
+        && a.positions.len() == b.positions.len()
+        && a.positions
+            .iter()
+            .zip(&b.positions)
+            .all(|(p, q)| p.map(f64::to_bits) == q.map(f64::to_bits))
 }
 
 fn best<T>(reps: usize, mut f: impl FnMut() -> (f64, T)) -> (f64, T) {
@@ -300,13 +303,7 @@ fn main() {
                 .expect("valid tile");
             assert!(!first.fell_back, "the GPU path fell back to the CPU");
             assert!(
-                got.keys == want.keys
-                    && got.triangles == want.triangles
-                    && got
-                        .positions
-                        .iter()
-                        .zip(&want.positions)
-                        .all(|(a, b)| a.map(f64::to_bits) == b.map(f64::to_bits)),
+                same_mesh(&got, &want),
                 "GPU mesh differs from the CPU mesh ({n}³ {kind})"
             );
             let (e2e, s): (f64, GpuStats) = best(reps, || {
@@ -421,13 +418,7 @@ fn blended(sizes: &[usize], reps: usize, threads: usize, mut gpu: Option<&mut Gp
         assert!(!first.fell_back, "the GPU path fell back to the CPU");
         assert!(first.field_on_gpu, "the field was blended on the host");
         assert!(
-            got.keys == want.keys
-                && got.triangles == want.triangles
-                && got
-                    .positions
-                    .iter()
-                    .zip(&want.positions)
-                    .all(|(a, b)| a.map(f64::to_bits) == b.map(f64::to_bits)),
+            same_mesh(&got, &want),
             "GPU mesh differs from the CPU mesh ({n}³ blended)"
         );
         let (cold, s): (f64, GpuStats) = best(reps, || {

@@ -1294,6 +1294,26 @@ impl GpuExtractor {
             .map_err(|e| format!("waiting for the GPU: {e}"))
     }
 
+    /// Map the first `bytes` bytes of `buf` (`what`, for errors) and wait for it.
+    fn map(
+        &self,
+        buf: &wgpu::Buffer,
+        mode: wgpu::MapMode,
+        bytes: u64,
+        what: &str,
+    ) -> GpuResult<()> {
+        let (tx, rx) = mpsc::channel();
+        buf.map_async(mode, 0..bytes, move |r| {
+            let _ = tx.send(r);
+        });
+        self.wait()?;
+        match rx.try_recv() {
+            Ok(Ok(())) => Ok(()),
+            Ok(Err(e)) => Err(format!("mapping {what}: {e}")),
+            Err(_) => Err(format!("{what} was not mapped")),
+        }
+    }
+
     /// Append the first `bytes` bytes of the read-back buffer `buf` to `out`.
     fn read<T: bytemuck::Pod + Send + Sync>(
         &self,
@@ -1304,16 +1324,7 @@ impl GpuExtractor {
         if bytes == 0 {
             return Ok(());
         }
-        let (tx, rx) = mpsc::channel();
-        buf.map_async(wgpu::MapMode::Read, 0..bytes, move |r| {
-            let _ = tx.send(r);
-        });
-        self.wait()?;
-        match rx.try_recv() {
-            Ok(Ok(())) => {}
-            Ok(Err(e)) => return Err(format!("mapping a read-back buffer: {e}")),
-            Err(_) => return Err("a read-back buffer was not mapped".to_string()),
-        }
+        self.map(buf, wgpu::MapMode::Read, bytes, "a read-back buffer")?;
         {
             let view = buf
                 .get_mapped_range(0..bytes)
@@ -1371,16 +1382,7 @@ impl GpuExtractor {
             let len = bytes.len() as u64;
             let write_usage = U::MAP_WRITE | U::COPY_SRC;
             let upload = ensure(&dev, &mut b.upload, "values upload", len, write_usage, cap);
-            let (tx, rx) = mpsc::channel();
-            upload.map_async(wgpu::MapMode::Write, 0..len, move |r| {
-                let _ = tx.send(r);
-            });
-            self.wait()?;
-            match rx.try_recv() {
-                Ok(Ok(())) => {}
-                Ok(Err(e)) => return Err(format!("mapping the upload buffer: {e}")),
-                Err(_) => return Err("the upload buffer was not mapped".to_string()),
-            }
+            self.map(&upload, wgpu::MapMode::Write, len, "the upload buffer")?;
             {
                 let mut view = upload
                     .get_mapped_range_mut(0..len)
