@@ -148,6 +148,8 @@ pub struct GpuStats {
     /// Bytes sent to the device: node values, or for a blended tile
     /// ([`GpuExtractor::extract_blend`]) the leaf grids not yet resident and the tables.
     pub upload_bytes: u64,
+    /// Leaf grids sent to the device (not resident yet) for a blended tile.
+    pub leaves_sent: u64,
     /// True when a blended tile's field was built on the device.
     pub field_on_gpu: bool,
 }
@@ -454,6 +456,12 @@ enum BlockValues<'a> {
     /// the shader's parameters (from `lox` on).
     Device([usize; 3], &'a [u32; 20]),
 }
+
+/// Bytes of the leaf pool on a discrete GPU, an integrated one, and other adapters (at most
+/// the buffer limit, at least twice a tile's leaves).
+const POOL_DISCRETE: u64 = 1 << 30;
+const POOL_INTEGRATED: u64 = 256 << 20;
+const POOL_OTHER: u64 = 32 << 20;
 
 /// No leaf in this cell of a blended tile's lookup box (`field.wgsl`).
 const NO_LEAF: u32 = u32::MAX;
@@ -910,7 +918,18 @@ impl GpuExtractor {
         }
         let pool = &mut self.pool;
         if pool.dm != dm || pool.slots < leaves.len() || pool.buf.is_none() {
-            let slots = (2 * leaves.len()).max(64).min(max_slots);
+            // Room for the leaves of many tiles: a leaf serves up to 8 tiles, not all close
+            // in Morton order. Device memory of its own on a discrete GPU; host memory on
+            // integrated and software adapters, so less there.
+            let target = match self.info.device_type {
+                wgpu::DeviceType::DiscreteGpu => POOL_DISCRETE,
+                wgpu::DeviceType::IntegratedGpu => POOL_INTEGRATED,
+                _ => POOL_OTHER,
+            };
+            let slots = (2 * leaves.len())
+                .max((target / slot_bytes) as usize)
+                .max(1)
+                .min(max_slots);
             *pool = LeafPool {
                 buf: Some(self.device.create_buffer(&wgpu::BufferDescriptor {
                     label: Some("leaf grids"),
@@ -948,6 +967,7 @@ impl GpuExtractor {
                         bytemuck::cast_slice(l.detail),
                     );
                     stats.upload_bytes += slot_bytes;
+                    stats.leaves_sent += 1;
                     s
                 }
             };

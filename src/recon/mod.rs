@@ -1253,6 +1253,7 @@ pub fn reconstruct(
     // leaves of the last wave (the next wave's tiles are its neighbours), within a sixth of
     // the budget.
     let detail_cap = ctx.budget.total() / 6;
+    let mut gpu_totals = GpuTotals::default();
     let mut detail_cache = DetailCache::new(&leaves_dir, dm, unit, detail_cap);
     let _detail_permit = ctx.budget.acquire(detail_cap, "the leaf detail cache")?;
     let tile_nodes = (plan.tile + 1).pow(3);
@@ -1364,6 +1365,7 @@ pub fn reconstruct(
                 let pool = &ctx.pool;
                 std::thread::scope(|s| -> Result<()> {
                     let (loaded, plan, own, coarse) = (&loaded, &plan, &own, &coarse);
+                    let gpu_totals = &mut gpu_totals;
                     s.spawn(move || {
                         for (i, (_, lo, ds)) in loaded.iter().enumerate() {
                             let Some(ds) = ds else { continue };
@@ -1372,7 +1374,10 @@ pub fn reconstruct(
                             // The host side of the GPU call uses rayon: keep it on our pool.
                             let r = pool
                                 .install(|| g.extract_blend(&b, iso as f32, &geom, &mut mesh))
-                                .map(|_| mesh);
+                                .map(|st| {
+                                    gpu_totals.add(&st);
+                                    mesh
+                                });
                             if tx.send((i, r)).is_err() {
                                 break;
                             }
@@ -1449,6 +1454,9 @@ pub fn reconstruct(
         stage.inc((t - stage.done()).min(tiles_total));
     }
     stage.finish(None);
+    if gpu.is_some() {
+        gpu_totals.log();
+    }
     let ws = writer.into_inner().finish()?;
     Ok(ReconStats {
         vertices: ws.vertices,
@@ -1647,6 +1655,41 @@ fn tile_blend<'a>(
                 detail: d,
             })
             .collect(),
+    }
+}
+
+/// What the GPU did over a run, for the log.
+#[derive(Debug, Default)]
+struct GpuTotals {
+    tiles: u64,
+    on_device: u64,
+    fell_back: u64,
+    leaves_sent: u64,
+    bytes: u64,
+    secs: f64,
+}
+
+impl GpuTotals {
+    fn add(&mut self, s: &crate::extract::GpuStats) {
+        self.tiles += 1;
+        self.on_device += s.field_on_gpu as u64;
+        self.fell_back += s.fell_back as u64;
+        self.leaves_sent += s.leaves_sent;
+        self.bytes += s.upload_bytes;
+        self.secs += s.upload_secs + s.kernel_secs + s.download_secs + s.host_secs;
+    }
+
+    fn log(&self) {
+        log::info!(
+            "GPU: {} tiles in {:.2} s, {} with the field built on the device, {} on the CPU \
+             after a GPU failure; {} leaf grids and {:.1} MB sent",
+            self.tiles,
+            self.secs,
+            self.on_device,
+            self.fell_back,
+            self.leaves_sent,
+            self.bytes as f64 / 1e6
+        );
     }
 }
 
