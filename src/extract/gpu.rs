@@ -1846,6 +1846,32 @@ mod tests {
     }
 
     #[test]
+    fn gpu_errors_on_blended_tiles_fall_back_to_the_cpu() {
+        use crate::extract::field::tests::RandomBlend;
+        let Some(mut g) = gpu() else { return };
+        let geom = GridGeom::new([0.0, 0.0, 0.0], 0.01, 1024).unwrap();
+        let rb = RandomBlend::new(21, [32, 0, 64], [33, 20, 25], 32, 0.8);
+        let b = rb.blend();
+        let mut want = TileMesh::default();
+        McWorkspace::new()
+            .extract(&b.eval(), b.dims, [32, 0, 64], 0.1, &geom, &mut want)
+            .unwrap();
+        // A validation error on the device: this tile on the CPU, the next on the GPU.
+        g.fail_next = true;
+        let mut got = TileMesh::default();
+        let s = g.extract_blend(&b, 0.1, &geom, &mut got).unwrap();
+        assert!(s.fell_back);
+        assert_eq!(got, want);
+        let s = assert_same_blend(&mut g, &b, 0.1, &geom);
+        assert!(s.field_on_gpu);
+        // Inconsistent tables are the caller's error, not a fallback.
+        let mut bad = rb.blend();
+        bad.axes[0].w0.pop();
+        let e = g.extract_blend(&bad, 0.1, &geom, &mut got).unwrap_err();
+        assert!(e.to_string().contains("axis 0"), "{e}");
+    }
+
+    #[test]
     fn resident_leaves_are_not_sent_again() {
         use crate::extract::field::tests::RandomBlend;
         let Some(mut g) = gpu() else { return };
