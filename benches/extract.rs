@@ -27,7 +27,7 @@
 use std::time::Instant;
 
 use rayon::prelude::*;
-use scanflow::extract::field::{Axis, Blend, Leaf, quantise, unit_for};
+use scanflow::extract::field::{Axis, Blend, Leaf, quantise, quantise_detail, unit_for};
 use scanflow::extract::{GpuExtractor, GpuMode, GpuStats, GridGeom, McWorkspace, TileMesh};
 
 /// A tile of `n + 1` nodes per axis: a sphere of radius `0.4·n` (few active cells) or a
@@ -78,7 +78,7 @@ struct BlendData {
     cn: usize,
     unit: f32,
     own: Vec<i32>,
-    leaves: Vec<([i64; 3], Vec<i32>)>,
+    leaves: Vec<([i64; 3], (Vec<i16>, u32))>,
 }
 
 impl BlendData {
@@ -129,7 +129,7 @@ impl BlendData {
                     let g = [0, 1, 2].map(|a| (E * c[a] - OV + o[a] as i64).clamp(0, n as i64));
                     d.push((bumpy(n, g.map(|v| v as f64)) - trilinear(g)) as f32);
                 }
-                (c, quantise(&d, unit))
+                (c, quantise_detail(&d, unit))
             })
             .collect();
         let own = scanflow::recon::pou::leaf_weights(E, OV);
@@ -168,10 +168,11 @@ impl BlendData {
                 .leaves
                 .iter()
                 .enumerate()
-                .map(|(i, (c, d))| Leaf {
+                .map(|(i, (c, (d, shift)))| Leaf {
                     cell: *c,
                     id: i as u64,
                     detail: d,
+                    shift: *shift,
                 })
                 .collect(),
         }

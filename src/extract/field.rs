@@ -26,7 +26,8 @@
 //! # Why both sides agree to the bit
 //!
 //! The blend is done in integers: values are fixed point in a power-of-two `unit`
-//! ([`unit_for`], [`quantise`]), a node's field is the exact 64-bit integer
+//! ([`unit_for`], [`quantise`]; details in 16 bits of `unit·2^shift` per leaf,
+//! [`quantise_detail`]), a node's field is the exact 64-bit integer
 //!
 //! ```text
 //! N = ((Σ_corners w·c) << (3B − 3k)  +  Σ_leaves q_z·q_y·q_x·d) >> 3B
@@ -46,6 +47,9 @@ pub const WEIGHT_BITS: u32 = 10;
 
 /// Largest magnitude of a fixed-point value (coarse or detail); larger ones are clamped.
 pub const VALUE_LIMIT: i32 = 1 << 26;
+
+/// Largest exponent of a leaf's 16-bit details: `2^15 · 2^11` is [`VALUE_LIMIT`].
+pub const MAX_SHIFT: u32 = 11;
 
 /// Largest magnitude of a node's fixed-point field: below `2^24`, so `f32` holds it exactly.
 pub const FIELD_LIMIT: i64 = (1 << 24) - 1;
@@ -69,8 +73,11 @@ pub struct Leaf<'a> {
     /// A name for the GPU's cache of leaf grids: the same id must mean the same detail for the
     /// life of a [`super::GpuExtractor`] (or until [`super::GpuExtractor::forget_leaves`]).
     pub id: u64,
-    /// `dm³` fixed-point values ([`quantise`]), x fastest.
-    pub detail: &'a [i32],
+    /// `dm³` values, x fastest, then one 0 if `dm³` is odd ([`quantise_detail`]): in units of
+    /// `unit·2^shift`.
+    pub detail: &'a [i16],
+    /// The leaf's exponent (at most [`MAX_SHIFT`]).
+    pub shift: u32,
 }
 
 /// One block's blended field; see the [module docs](self).
@@ -125,6 +132,30 @@ pub fn quantise(v: &[f32], unit: f32) -> Vec<i32> {
             }
         })
         .collect()
+}
+
+/// A leaf's detail grid in 16 bits: `round(v / (unit·2^shift))` with the smallest `shift`
+/// (at most [`MAX_SHIFT`]) that fits the largest value in an `i16`, padded with one 0 to an
+/// even length (the GPU reads two values a word). Details are corrections to the coarse
+/// solution, small next to the coarse values that set `unit`, so most leaves keep `shift`
+/// 0 and the same resolution as the coarse values; 16 bits halve what crosses the bus and
+/// what the caches hold.
+pub fn quantise_detail(v: &[f32], unit: f32) -> (Vec<i16>, u32) {
+    let fixed = quantise(v, unit);
+    let max = fixed.iter().map(|x| x.unsigned_abs()).max().unwrap_or(0);
+    let mut shift = 0;
+    while shift < MAX_SHIFT && (max >> shift) > i16::MAX as u32 {
+        shift += 1;
+    }
+    let half = if shift == 0 { 0 } else { 1i64 << (shift - 1) };
+    let mut q: Vec<i16> = fixed
+        .iter()
+        .map(|&x| ((x as i64 + half) >> shift).clamp(-(i16::MAX as i64), i16::MAX as i64) as i16)
+        .collect();
+    if q.len() % 2 == 1 {
+        q.push(0);
+    }
+    (q, shift)
 }
 
 /// Per-axis weights of a leaf at detail offsets `s = 0..dm`, for cells of `e` voxels with
@@ -228,8 +259,14 @@ impl Blend<'_> {
                 return Err(format!("axis {a}: coarse weights do not sum to {r}"));
             }
         }
-        if self.leaves.iter().any(|l| l.detail.len() != dm * dm * dm) {
-            return Err(format!("a leaf's detail is not {dm}³ values"));
+        let n = dm * dm * dm;
+        if self.leaves.iter().any(|l| l.detail.len() != n + n % 2) {
+            return Err(format!(
+                "a leaf's detail is not {dm}³ values (padded to even)"
+            ));
+        }
+        if self.leaves.iter().any(|l| l.shift > MAX_SHIFT) {
+            return Err(format!("a leaf's exponent exceeds {MAX_SHIFT}"));
         }
         let mut ids: Vec<u64> = self.leaves.iter().map(|l| l.id).collect();
         ids.sort_unstable();
@@ -268,8 +305,9 @@ impl Blend<'_> {
                     let d0 = (sz * dmu + sy) * dmu + sx0;
                     let d = &leaf.detail[d0..d0 + len];
                     let a0 = (pz as usize * ny + py as usize) * nx + p0[0] as usize;
+                    let sh = leaf.shift;
                     for ((r, &w), &v) in acc[a0..a0 + len].iter_mut().zip(wx).zip(d) {
-                        *r = r.wrapping_add((wzy * w as i64).wrapping_mul(v as i64));
+                        *r = r.wrapping_add((wzy * w as i64).wrapping_mul((v as i64) << sh));
                     }
                 }
             }
@@ -318,7 +356,7 @@ pub(crate) mod tests {
         pub unit: f32,
         pub coarse_full: Vec<i32>,
         pub coarse_n: usize,
-        pub details: Vec<([i64; 3], Vec<i32>)>,
+        pub details: Vec<([i64; 3], (Vec<i16>, u32))>,
     }
 
     impl RandomBlend {
@@ -346,7 +384,7 @@ pub(crate) mod tests {
                             let d: Vec<f32> = (0..dm * dm * dm)
                                 .map(|_| rng.random_range(-0.1f32..0.1))
                                 .collect();
-                            details.push(([x, y, z], quantise(&d, unit)));
+                            details.push(([x, y, z], quantise_detail(&d, unit)));
                         }
                     }
                 }
@@ -420,10 +458,11 @@ pub(crate) mod tests {
                     .details
                     .iter()
                     .enumerate()
-                    .map(|(i, (c, d))| Leaf {
+                    .map(|(i, (c, (d, shift)))| Leaf {
                         cell: *c,
                         id: i as u64,
                         detail: d,
+                        shift: *shift,
                     })
                     .collect(),
             }
@@ -453,7 +492,8 @@ pub(crate) mod tests {
                 (-2..=2).map(|m| self.bump(o - m * self.e + self.ov)).sum()
             };
             let mut acc = 0.0;
-            for (cell, d) in &self.details {
+            for (cell, (d, shift)) in &self.details {
+                let u = u * 2f64.powi(*shift as i32);
                 let s = [0, 1, 2].map(|a| g[a] - (self.e * cell[a] - self.ov));
                 if s.iter().all(|&v| (0..dm).contains(&v)) {
                     let w: f64 = (0..3).map(|a| self.bump(s[a]) / total(g[a])).product();
@@ -537,6 +577,21 @@ pub(crate) mod tests {
         let mut b = rb.blend();
         b.unit = 0.3;
         assert!(b.validate().unwrap_err().contains("power of two"));
+    }
+
+    #[test]
+    fn details_keep_16_bits_at_the_smallest_exponent() {
+        let u = unit_for(1.0);
+        let (q, s) = quantise_detail(&[0.001, -0.002, 0.0], u);
+        assert_eq!(s, 0);
+        assert_eq!(q, vec![2097, -4194, 0, 0]);
+        let (q, s) = quantise_detail(&[0.1, -0.05, 0.0001], u);
+        assert_eq!(s, 3);
+        assert_eq!(q[0] as i64 * 8, (0.1 / u as f64).round() as i64 / 8 * 8);
+        assert!(q.iter().all(|v| v.unsigned_abs() <= i16::MAX as u16));
+        // Beyond VALUE_LIMIT: clamped at the largest exponent.
+        let (q, s) = quantise_detail(&[1e9, -1e9], u);
+        assert_eq!((s, q), (MAX_SHIFT, vec![i16::MAX, -i16::MAX]));
     }
 
     #[test]

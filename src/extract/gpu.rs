@@ -39,10 +39,12 @@
 //! (`wgpu::Features::SHADER_INT64`), and tiles whose leaves exceed the pool's limit, are
 //! blended on the host and uploaded as above.
 //!
-//! Whether it pays depends on the bytes: a leaf grid is `(1.5·E + 1)³` values for a cell of
-//! `E³`, so the leaves near a surface through a tile can weigh more than the tile's dense
-//! values when every leaf is sent (`benches/extract.rs` prints both); what it saves is the
-//! host's blend, and the upload of leaves already resident.
+//! Whether it pays depends on the bytes: a leaf grid is `(1.5·E + 1)³` values of 16 bits
+//! ([`super::field::quantise_detail`]) for a cell of `E³` nodes of 32 bits, 1.7 times the
+//! cell's dense values, so it pays where leaves cover less than about 60% of a tile (a
+//! surface through a large tile) and where leaves are already resident
+//! (`benches/extract.rs` prints the bytes sent against the dense tile's); it also saves the
+//! host's blend.
 //!
 //! # Why the host finishes the job
 //!
@@ -462,6 +464,10 @@ enum BlockValues<'a> {
 const POOL_DISCRETE: u64 = 1 << 30;
 const POOL_INTEGRATED: u64 = 256 << 20;
 const POOL_OTHER: u64 = 32 << 20;
+
+/// Most slots of the leaf pool: a lookup entry is the slot in 24 bits and the leaf's exponent
+/// above them.
+const MAX_SLOTS: usize = (1 << 24) - 1;
 
 /// No leaf in this cell of a blended tile's lookup box (`field.wgsl`).
 const NO_LEAF: u32 = u32::MAX;
@@ -897,9 +903,10 @@ impl GpuExtractor {
             return Ok(None);
         }
         let dm = b.dm();
-        let slot_words = dm * dm * dm;
+        // Two 16-bit details a word (`quantise_detail`).
+        let slot_words = (dm * dm * dm).div_ceil(2);
         let slot_bytes = 4 * slot_words as u64;
-        let max_slots = (self.max_bytes / slot_bytes) as usize;
+        let max_slots = ((self.max_bytes / slot_bytes) as usize).min(MAX_SLOTS);
         let (e, ov) = (b.e, b.ov);
         let cells = |a: usize| {
             (
@@ -973,7 +980,7 @@ impl GpuExtractor {
             };
             pool.used[slot] = pool.clock;
             let c = [l.cell[0] - x0, l.cell[1] - y0, l.cell[2] - z0].map(|v| v as usize);
-            table[(c[2] * box_dims[1] + c[1]) * box_dims[0] + c[0]] = slot as u32;
+            table[(c[2] * box_dims[1] + c[1]) * box_dims[0] + c[0]] = slot as u32 | l.shift << 24;
         }
         let mut axes: Vec<[u32; 4]> = Vec::with_capacity(b.dims.iter().sum());
         for ax in &b.axes {
@@ -1021,7 +1028,7 @@ impl GpuExtractor {
             (b.dims[0] + b.dims[1]) as u32,
             b.unit.to_bits(),
             b.coarse_shift(),
-            0,
+            slot_words as u32,
             0,
         ]))
     }

@@ -46,7 +46,7 @@ use serde::{Deserialize, Serialize};
 use crate::error::{Error, IoContext, Result};
 use crate::exec::Ctx;
 use crate::extract::cpu::{GridGeom, TileMesh, marching_cubes};
-use crate::extract::field::{Axis, Blend, Leaf, quantise, unit_for};
+use crate::extract::field::{Axis, Blend, Leaf, quantise, quantise_detail, unit_for};
 use crate::extract::weld::Welder;
 use crate::io::mesh_write::MeshPlyWriter;
 use crate::store::Store;
@@ -1632,7 +1632,7 @@ fn tile_blend<'a>(
     coarse: &CoarseField,
     unit: f32,
     lo: [i64; 3],
-    details: &'a [(CellKey, Arc<Vec<i32>>)],
+    details: &'a [(CellKey, Arc<(Vec<i16>, u32)>)],
 ) -> Blend<'a> {
     let dims = [(plan.tile + 1) as usize; 3];
     let (cvals, coarse_dims, axes) = coarse.block(lo, dims, unit);
@@ -1652,7 +1652,8 @@ fn tile_blend<'a>(
             .map(|(k, d)| Leaf {
                 cell: k.decode().1.map(|v| v as i64),
                 id: k.0,
-                detail: d,
+                detail: &d.0,
+                shift: d.1,
             })
             .collect(),
     }
@@ -1698,7 +1699,7 @@ struct DetailCache {
     dir: PathBuf,
     m: usize,
     unit: f32,
-    map: HashMap<CellKey, Arc<Vec<i32>>>,
+    map: HashMap<CellKey, Arc<(Vec<i16>, u32)>>,
     lru: VecDeque<CellKey>,
     cap_entries: usize,
     max_entries: usize,
@@ -1706,7 +1707,8 @@ struct DetailCache {
 
 impl DetailCache {
     fn new(dir: &Path, m: usize, unit: f32, cap_bytes: u64) -> DetailCache {
-        let per = (m * m * m * 4) as u64;
+        // 16-bit details (`quantise_detail`).
+        let per = (m * m * m * 2) as u64;
         DetailCache {
             dir: dir.to_path_buf(),
             m,
@@ -1733,11 +1735,11 @@ impl DetailCache {
     }
 
     /// Leaf `k`'s detail in fixed point.
-    fn get(&mut self, k: CellKey) -> Result<Arc<Vec<i32>>> {
+    fn get(&mut self, k: CellKey) -> Result<Arc<(Vec<i16>, u32)>> {
         if let Some(d) = self.map.get(&k) {
             return Ok(Arc::clone(d));
         }
-        let d = Arc::new(quantise(
+        let d = Arc::new(quantise_detail(
             &read_leaf(&self.dir, k, self.m)?.detail,
             self.unit,
         ));

@@ -31,7 +31,7 @@ struct Field {
     offz: u32,
     unit: f32,      // the fixed-point unit, a power of two
     cshift: u32,    // shift of the coarse sum: 3·(WEIGHT_BITS − coarse_bits)
-    pad0: u32,
+    slot_words: u32, // words of a pool slot: dm³ 16-bit details, two a word
     pad1: u32,
 }
 
@@ -45,9 +45,11 @@ const FIELD_LIMIT: i32 = 16777215;
 @group(0) @binding(1) var<storage, read> axes: array<vec4<u32>>;
 @group(0) @binding(2) var<storage, read> coarse: array<i32>;
 @group(0) @binding(3) var<storage, read> own: array<i32>;
-// Pool slot of each leaf cell of the lookup box, 0xffffffff where there is no leaf.
+// Per leaf cell of the lookup box: its pool slot | its exponent << 24, 0xffffffff where there
+// is no leaf.
 @group(0) @binding(4) var<storage, read> slots: array<u32>;
-@group(0) @binding(5) var<storage, read> pool: array<i32>;
+// Leaf details, 16 bits each, two a word (the lower half first), slot_words a slot.
+@group(0) @binding(5) var<storage, read> pool: array<u32>;
 @group(0) @binding(6) var<storage, read_write> values: array<f32>;
 
 const NONE: u32 = 0xffffffffu;
@@ -105,11 +107,14 @@ fn main(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_index) 
             let wzy = i64(own[sz]) * i64(own[sy]);
             for (var jx = 0; jx < kx.y; jx++) {
                 let cx = u32(kx.x + jx - prm.cmx);
-                let slot = slots[(cz * prm.ty + cy) * prm.tx + cx];
-                if (slot != NONE) {
+                let entry = slots[(cz * prm.ty + cy) * prm.tx + cx];
+                if (entry != NONE) {
                     let sx = u32(kx.z - jx * prm.e);
-                    let d = pool[slot * dm * dm * dm + (sz * dm + sy) * dm + sx];
-                    acc += wzy * i64(own[sx]) * i64(d);
+                    let k = (sz * dm + sy) * dm + sx;
+                    let word = pool[(entry & 0xffffffu) * prm.slot_words + k / 2u];
+                    // The 16-bit half, sign-extended.
+                    let d = bitcast<i32>(select(word << 16u, word & 0xffff0000u, (k & 1u) == 1u)) >> 16u;
+                    acc += wzy * i64(own[sx]) * (i64(d) << (entry >> 24u));
                 }
             }
         }
