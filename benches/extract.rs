@@ -27,7 +27,7 @@
 use std::time::Instant;
 
 use rayon::prelude::*;
-use scanflow::extract::field::{Axis, Blend, Leaf, quantise, quantise_detail, unit_for};
+use scanflow::extract::field::{Axis, Blend, Detail, Leaf, quantise, quantise_detail, unit_for};
 use scanflow::extract::{GpuExtractor, GpuMode, GpuStats, GridGeom, McWorkspace, TileMesh};
 
 /// A tile of `n + 1` nodes per axis: a sphere of radius `0.4·n` (few active cells) or a
@@ -78,7 +78,7 @@ struct BlendData {
     cn: usize,
     unit: f32,
     own: Vec<i32>,
-    leaves: Vec<([i64; 3], (Vec<i16>, u32))>,
+    leaves: Vec<([i64; 3], Detail)>,
 }
 
 impl BlendData {
@@ -168,11 +168,11 @@ impl BlendData {
                 .leaves
                 .iter()
                 .enumerate()
-                .map(|(i, (c, (d, shift)))| Leaf {
+                .map(|(i, (c, d))| Leaf {
                     cell: *c,
                     id: i as u64,
-                    detail: d,
-                    shift: *shift,
+                    detail: &d.values,
+                    shift: d.shift,
                 })
                 .collect(),
         }

@@ -140,7 +140,7 @@ pub fn quantise(v: &[f32], unit: f32) -> Vec<i32> {
 /// solution, small next to the coarse values that set `unit`, so most leaves keep `shift`
 /// 0 and the same resolution as the coarse values; 16 bits halve what crosses the bus and
 /// what the caches hold.
-pub fn quantise_detail(v: &[f32], unit: f32) -> (Vec<i16>, u32) {
+pub fn quantise_detail(v: &[f32], unit: f32) -> Detail {
     let fixed = quantise(v, unit);
     let max = fixed.iter().map(|x| x.unsigned_abs()).max().unwrap_or(0);
     let mut shift = 0;
@@ -155,7 +155,16 @@ pub fn quantise_detail(v: &[f32], unit: f32) -> (Vec<i16>, u32) {
     if q.len() % 2 == 1 {
         q.push(0);
     }
-    (q, shift)
+    Detail { values: q, shift }
+}
+
+/// A leaf's detail grid in 16 bits ([`quantise_detail`]).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Detail {
+    /// The values in units of `unit·2^shift`, padded to an even length.
+    pub values: Vec<i16>,
+    /// The exponent.
+    pub shift: u32,
 }
 
 /// Per-axis weights of a leaf at detail offsets `s = 0..dm`, for cells of `e` voxels with
@@ -356,7 +365,7 @@ pub(crate) mod tests {
         pub unit: f32,
         pub coarse_full: Vec<i32>,
         pub coarse_n: usize,
-        pub details: Vec<([i64; 3], (Vec<i16>, u32))>,
+        pub details: Vec<([i64; 3], Detail)>,
     }
 
     impl RandomBlend {
@@ -458,11 +467,11 @@ pub(crate) mod tests {
                     .details
                     .iter()
                     .enumerate()
-                    .map(|(i, (c, (d, shift)))| Leaf {
+                    .map(|(i, (c, d))| Leaf {
                         cell: *c,
                         id: i as u64,
-                        detail: d,
-                        shift: *shift,
+                        detail: &d.values,
+                        shift: d.shift,
                     })
                     .collect(),
             }
@@ -492,7 +501,7 @@ pub(crate) mod tests {
                 (-2..=2).map(|m| self.bump(o - m * self.e + self.ov)).sum()
             };
             let mut acc = 0.0;
-            for (cell, (d, shift)) in &self.details {
+            for (cell, Detail { values: d, shift }) in &self.details {
                 let u = u * 2f64.powi(*shift as i32);
                 let s = [0, 1, 2].map(|a| g[a] - (self.e * cell[a] - self.ov));
                 if s.iter().all(|&v| (0..dm).contains(&v)) {
@@ -582,16 +591,22 @@ pub(crate) mod tests {
     #[test]
     fn details_keep_16_bits_at_the_smallest_exponent() {
         let u = unit_for(1.0);
-        let (q, s) = quantise_detail(&[0.001, -0.002, 0.0], u);
+        let Detail {
+            values: q,
+            shift: s,
+        } = quantise_detail(&[0.001, -0.002, 0.0], u);
         assert_eq!(s, 0);
         assert_eq!(q, vec![2097, -4194, 0, 0]);
-        let (q, s) = quantise_detail(&[0.1, -0.05, 0.0001], u);
+        let Detail {
+            values: q,
+            shift: s,
+        } = quantise_detail(&[0.1, -0.05, 0.0001], u);
         assert_eq!(s, 3);
         assert_eq!(q[0] as i64 * 8, (0.1 / u as f64).round() as i64 / 8 * 8);
         assert!(q.iter().all(|v| v.unsigned_abs() <= i16::MAX as u16));
         // Beyond VALUE_LIMIT: clamped at the largest exponent.
-        let (q, s) = quantise_detail(&[1e9, -1e9], u);
-        assert_eq!((s, q), (MAX_SHIFT, vec![i16::MAX, -i16::MAX]));
+        let d = quantise_detail(&[1e9, -1e9], u);
+        assert_eq!((d.shift, d.values), (MAX_SHIFT, vec![i16::MAX, -i16::MAX]));
     }
 
     #[test]

@@ -46,7 +46,7 @@ use serde::{Deserialize, Serialize};
 use crate::error::{Error, IoContext, Result};
 use crate::exec::Ctx;
 use crate::extract::cpu::{GridGeom, TileMesh, marching_cubes};
-use crate::extract::field::{Axis, Blend, Leaf, quantise, quantise_detail, unit_for};
+use crate::extract::field::{Axis, Blend, Detail, Leaf, quantise, quantise_detail, unit_for};
 use crate::extract::weld::Welder;
 use crate::io::mesh_write::MeshPlyWriter;
 use crate::store::Store;
@@ -1632,7 +1632,7 @@ fn tile_blend<'a>(
     coarse: &CoarseField,
     unit: f32,
     lo: [i64; 3],
-    details: &'a [(CellKey, Arc<(Vec<i16>, u32)>)],
+    details: &'a [(CellKey, Arc<Detail>)],
 ) -> Blend<'a> {
     let dims = [(plan.tile + 1) as usize; 3];
     let (cvals, coarse_dims, axes) = coarse.block(lo, dims, unit);
@@ -1652,8 +1652,8 @@ fn tile_blend<'a>(
             .map(|(k, d)| Leaf {
                 cell: k.decode().1.map(|v| v as i64),
                 id: k.0,
-                detail: &d.0,
-                shift: d.1,
+                detail: &d.values,
+                shift: d.shift,
             })
             .collect(),
     }
@@ -1699,7 +1699,7 @@ struct DetailCache {
     dir: PathBuf,
     m: usize,
     unit: f32,
-    map: HashMap<CellKey, Arc<(Vec<i16>, u32)>>,
+    map: HashMap<CellKey, Arc<Detail>>,
     lru: VecDeque<CellKey>,
     cap_entries: usize,
     max_entries: usize,
@@ -1735,7 +1735,7 @@ impl DetailCache {
     }
 
     /// Leaf `k`'s detail in fixed point.
-    fn get(&mut self, k: CellKey) -> Result<Arc<(Vec<i16>, u32)>> {
+    fn get(&mut self, k: CellKey) -> Result<Arc<Detail>> {
         if let Some(d) = self.map.get(&k) {
             return Ok(Arc::clone(d));
         }
