@@ -1,8 +1,11 @@
 #!/usr/bin/env bash
 # Marching cubes per tile: CPU (one core and all cores) against the GPU path (wgpu), in cells
 # per second, the GPU time split into upload, kernels, download and host work, printed as
-# ratios. The GPU mesh is checked identical to the CPU mesh first. See benches/extract.rs for
-# what is compared and why it is fair (it favours the CPU).
+# ratios. The GPU mesh is checked identical to the CPU mesh first. A second table does the same
+# for blended tiles (the reconstruction's case): the field blended from leaf grids on the host
+# and extracted, against the field built on the device (leaves sent, or already resident), with
+# the bytes sent against the dense tile's. See benches/extract.rs for what is compared and why
+# it is fair (it favours the CPU).
 #
 #   scripts/bench_extract.sh                       # tiles of 256³ and 512³ cells, any GPU
 #   SIZES="32 64" REPS=2 scripts/bench_extract.sh  # small, e.g. on lavapipe
