@@ -99,7 +99,8 @@ pub struct Blend<'a> {
     pub e: i64,
     /// Detail overlap in fine voxels (`1 <= ov < e/2`).
     pub ov: i64,
-    /// Weight at detail offset `s`, `dm` entries ([`pou_weights`]).
+    /// Weight at detail offset `s`, `dm` entries, 0 at both ends ([`pou_weights`]; the GPU
+    /// skips the ends).
     pub own: Vec<i32>,
     /// The fixed-point unit, a power of two ([`unit_for`]).
     pub unit: f32,
@@ -224,9 +225,12 @@ impl Blend<'_> {
                 .own
                 .iter()
                 .any(|&q| !(0..=1 << WEIGHT_BITS).contains(&q))
+            || self.own[0] != 0
+            || self.own[dm - 1] != 0
         {
             return Err(format!(
-                "{} weights for {dm} detail nodes, or out of 0..=2^{WEIGHT_BITS}",
+                "{} weights for {dm} detail nodes, out of 0..=2^{WEIGHT_BITS}, or not 0 at \
+                 both ends",
                 self.own.len()
             ));
         }
@@ -575,6 +579,9 @@ pub(crate) mod tests {
         let mut b = rb.blend();
         b.own.pop();
         assert!(b.validate().unwrap_err().contains("weights"));
+        let mut b = rb.blend();
+        b.own[0] = 1;
+        assert!(b.validate().unwrap_err().contains("both ends"));
         let mut b = rb.blend();
         b.axes[1].c0[3] = 1000;
         assert!(b.validate().unwrap_err().contains("axis 1"));
