@@ -284,6 +284,12 @@ impl Blend<'_> {
         if ids.windows(2).any(|w| w[0] == w[1]) {
             return Err("two leaves with one id".into());
         }
+        // The GPU looks leaves up by cell: one leaf a cell.
+        let mut cells: Vec<[i64; 3]> = self.leaves.iter().map(|l| l.cell).collect();
+        cells.sort_unstable();
+        if cells.windows(2).any(|w| w[0] == w[1]) {
+            return Err("two leaves in one cell".into());
+        }
         Ok(())
     }
 
@@ -588,6 +594,10 @@ pub(crate) mod tests {
         let mut b = rb.blend();
         b.axes[2].w1[1] += 1;
         assert!(b.validate().unwrap_err().contains("sum"));
+        let mut b = rb.blend();
+        assert!(b.leaves.len() > 1, "the test blend has several leaves");
+        b.leaves[1].cell = b.leaves[0].cell;
+        assert!(b.validate().unwrap_err().contains("one cell"));
         let mut b = rb.blend();
         b.unit = 0.3;
         assert!(b.validate().unwrap_err().contains("power of two"));

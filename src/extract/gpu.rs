@@ -1301,8 +1301,10 @@ impl GpuExtractor {
             }
         }
         if res.is_err() || !errors.is_empty() {
-            // A buffer may be left mapped or invalid: start the next tile with fresh ones.
+            // A buffer may be left mapped or invalid: start the next tile with fresh ones,
+            // the leaf pool included (its slots may not hold what the map says).
             self.bufs = Buffers::default();
+            self.pool = LeafPool::default();
         }
         match res {
             Ok(o) if errors.is_empty() => Ok(o),

@@ -715,7 +715,6 @@ impl NearPoints {
     }
 }
 
-/// `v` moved onto the plane of its neighbours `nb` (see [`NearPoints::fit_vertices`]).
 /// A tile's points bucketed in a uniform grid, for exact k-nearest queries by growing shells
 /// of cells: after the shell at Chebyshev distance `r` from the query's cell, every point not
 /// yet seen lies at least `r·s` plus the query's distance to its own cell's faces away.
@@ -855,6 +854,7 @@ impl<'a> PointGrid<'a> {
     }
 }
 
+/// `v` moved onto the plane of its neighbours `nb` (see [`NearPoints::fit_vertices`]).
 fn project(v: [f64; 3], nb: &[(f64, [f64; 3], [u16; 3], f32)], h: f64) -> [f64; 3] {
     if nb.len() < 3 || nb[0].0 > 4.0 * h * h {
         return v;
