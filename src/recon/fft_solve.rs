@@ -47,9 +47,10 @@ impl LocalGrid {
 
     /// Bytes of scratch [`solve`] needs at its peak: the splatted normals (12 bytes a node)
     /// and their divergence (4); the complex transform buffer (8) comes after the splat is
-    /// dropped, the result (4) after the divergence is.
+    /// dropped, the result (4) after the divergence is. Plus the [`Solver`]'s filter table.
     pub fn scratch_bytes(&self) -> u64 {
-        self.len() as u64 * 16
+        let h1 = (self.n / 2 + 1) as u64;
+        self.len() as u64 * 16 + h1 * h1 * h1 * 4
     }
 
     /// Trilinear interpolation of node values `v` at world point `p` (periodic).
@@ -83,9 +84,7 @@ impl LocalGrid {
 /// Solve for the smoothed indicator on `grid` from points `pos` with outward unit normals
 /// `nrm`; returns node values (x fastest). `sigma_vox` is the Gaussian width in voxels.
 pub fn solve(grid: &LocalGrid, pos: &[[f64; 3]], nrm: &[[f32; 3]], sigma_vox: f64) -> Vec<f32> {
-    let mut v = vec![[0f32; 3]; grid.len()];
-    splat(grid, pos, nrm, &mut v);
-    solve_splatted(grid, v, sigma_vox)
+    Solver::new(grid, sigma_vox).solve(grid, pos, nrm)
 }
 
 /// Add the normals of `pos`/`nrm` to `v` (one `[f32; 3]` per node) as a density.
@@ -95,95 +94,147 @@ pub fn splat(grid: &LocalGrid, pos: &[[f64; 3]], nrm: &[[f32; 3]], v: &mut [[f32
     let scale = (inv_h * inv_h * inv_h) as f32;
     let ni = n as i64;
     for (p, nn) in pos.iter().zip(nrm) {
-        let mut i0 = [0i64; 3];
-        let mut f = [0f32; 3];
+        // Per axis: the two node indices (wrapped) and their weights.
+        let mut at = [[0usize; 2]; 3];
+        let mut w = [[0f32; 2]; 3];
         for a in 0..3 {
             let u = (p[a] - grid.origin[a]) * inv_h;
             let fl = u.floor();
-            i0[a] = fl as i64;
-            f[a] = (u - fl) as f32;
+            let i0 = fl as i64;
+            let f = (u - fl) as f32;
+            at[a] = [i0.rem_euclid(ni) as usize, (i0 + 1).rem_euclid(ni) as usize];
+            w[a] = [1.0 - f, f];
         }
         for c in 0..8usize {
-            let (dx, dy, dz) = ((c & 1) as i64, ((c >> 1) & 1) as i64, ((c >> 2) & 1) as i64);
-            let w = (if dx == 1 { f[0] } else { 1.0 - f[0] })
-                * (if dy == 1 { f[1] } else { 1.0 - f[1] })
-                * (if dz == 1 { f[2] } else { 1.0 - f[2] })
-                * scale;
-            let x = (i0[0] + dx).rem_euclid(ni) as usize;
-            let y = (i0[1] + dy).rem_euclid(ni) as usize;
-            let z = (i0[2] + dz).rem_euclid(ni) as usize;
-            let cell = &mut v[(z * n + y) * n + x];
-            cell[0] += w * nn[0];
-            cell[1] += w * nn[1];
-            cell[2] += w * nn[2];
+            let (dx, dy, dz) = (c & 1, (c >> 1) & 1, (c >> 2) & 1);
+            let wc = w[0][dx] * w[1][dy] * w[2][dz] * scale;
+            let cell = &mut v[(at[2][dz] * n + at[1][dy]) * n + at[0][dx]];
+            cell[0] += wc * nn[0];
+            cell[1] += wc * nn[1];
+            cell[2] += wc * nn[2];
         }
     }
 }
 
 /// Solve from splatted normals (consumed).
 pub fn solve_splatted(grid: &LocalGrid, v: Vec<[f32; 3]>, sigma_vox: f64) -> Vec<f32> {
-    let n = grid.n;
-    let len = grid.len();
-    let inv_h = 1.0 / grid.h;
-    // Divergence by central differences, then the splat is dropped: the solve peaks at the
-    // splat plus the divergence (16 bytes a node), the transform itself needs 8.
-    let half_inv_h = (0.5 * inv_h) as f32;
-    let mut div = vec![0f32; len];
-    div.par_chunks_mut(n * n).enumerate().for_each(|(z, slab)| {
-        let zp = (z + 1) % n;
-        let zm = (z + n - 1) % n;
-        for y in 0..n {
-            let yp = (y + 1) % n;
-            let ym = (y + n - 1) % n;
-            for x in 0..n {
-                let xp = (x + 1) % n;
-                let xm = (x + n - 1) % n;
-                let at = |x: usize, y: usize, z: usize| (z * n + y) * n + x;
-                let d = (v[at(xp, y, z)][0] - v[at(xm, y, z)][0])
-                    + (v[at(x, yp, z)][1] - v[at(x, ym, z)][1])
-                    + (v[at(x, y, zp)][2] - v[at(x, y, zm)][2]);
-                slab[y * n + x] = d * half_inv_h;
-            }
-        }
-    });
-    drop(v);
-    let mut buf: Vec<Complex32> = div.iter().map(|&d| Complex32::new(d, 0.0)).collect();
-    drop(div);
-    let mut planner = FftPlanner::<f32>::new();
-    let fwd = planner.plan_fft_forward(n);
-    let inv = planner.plan_fft_inverse(n);
-    fft3(&mut buf, n, &fwd);
-    // Apply −G_σ/|k|².
-    let two_pi_over_l = 2.0 * std::f64::consts::PI / (n as f64 * grid.h);
-    let sigma = sigma_vox * grid.h;
-    let k2: Vec<f64> = (0..n)
-        .map(|m| {
-            let s = if m <= n / 2 {
-                m as f64
-            } else {
-                m as f64 - n as f64
-            };
-            let k = s * two_pi_over_l;
-            k * k
-        })
-        .collect();
-    buf.par_chunks_mut(n * n).enumerate().for_each(|(z, slab)| {
-        for y in 0..n {
-            for x in 0..n {
-                let kk = k2[x] + k2[y] + k2[z];
-                let c = &mut slab[y * n + x];
-                if kk == 0.0 {
-                    *c = Complex32::new(0.0, 0.0);
-                } else {
-                    let g = (-(0.5 * sigma * sigma * kk)).exp() / kk;
-                    *c *= -(g as f32);
+    Solver::new(grid, sigma_vox).solve_splatted(grid, v)
+}
+
+/// What every solve on grids of one size and spacing shares: the FFT plans and the filter
+/// `−G_σ(k)/|k|²`, tabulated once over `|m|` per axis (`(n/2 + 1)³` values; the filter is
+/// even in each frequency index). Build one per grid shape and reuse it across leaves.
+pub struct Solver {
+    n: usize,
+    h: f64,
+    fwd: Arc<dyn Fft<f32>>,
+    inv: Arc<dyn Fft<f32>>,
+    /// `filter[(az·(n/2+1) + ay)·(n/2+1) + ax]` for folded indices `a = min(m, n − m)`.
+    filter: Vec<f32>,
+}
+
+impl Solver {
+    /// Plans and filter for grids of `grid.n` nodes and spacing `grid.h`.
+    pub fn new(grid: &LocalGrid, sigma_vox: f64) -> Solver {
+        let n = grid.n;
+        let mut planner = FftPlanner::<f32>::new();
+        let fwd = planner.plan_fft_forward(n);
+        let inv = planner.plan_fft_inverse(n);
+        let two_pi_over_l = 2.0 * std::f64::consts::PI / (n as f64 * grid.h);
+        let sigma = sigma_vox * grid.h;
+        let h1 = n / 2 + 1;
+        // k² by folded index: m and n − m have the same |k|.
+        let k2: Vec<f64> = (0..h1)
+            .map(|m| {
+                let k = m as f64 * two_pi_over_l;
+                k * k
+            })
+            .collect();
+        let mut filter = vec![0f32; h1 * h1 * h1];
+        for z in 0..h1 {
+            for y in 0..h1 {
+                for x in 0..h1 {
+                    let kk = k2[x] + k2[y] + k2[z];
+                    if kk != 0.0 {
+                        let g = (-(0.5 * sigma * sigma * kk)).exp() / kk;
+                        filter[(z * h1 + y) * h1 + x] = -(g as f32);
+                    }
                 }
             }
         }
-    });
-    fft3(&mut buf, n, &inv);
-    let norm = 1.0 / len as f32;
-    buf.iter().map(|c| c.re * norm).collect()
+        Solver {
+            n,
+            h: grid.h,
+            fwd,
+            inv,
+            filter,
+        }
+    }
+
+    /// Splat `pos`/`nrm` onto `grid` (which must have this solver's size and spacing) and
+    /// solve.
+    pub fn solve(&self, grid: &LocalGrid, pos: &[[f64; 3]], nrm: &[[f32; 3]]) -> Vec<f32> {
+        let mut v = vec![[0f32; 3]; grid.len()];
+        splat(grid, pos, nrm, &mut v);
+        self.solve_splatted(grid, v)
+    }
+
+    /// Solve from splatted normals (consumed) on `grid`, of this solver's size and spacing.
+    pub fn solve_splatted(&self, grid: &LocalGrid, v: Vec<[f32; 3]>) -> Vec<f32> {
+        assert!(
+            grid.n == self.n && grid.h == self.h,
+            "a solver for {}³ nodes at spacing {} used on {}³ at {}",
+            self.n,
+            self.h,
+            grid.n,
+            grid.h
+        );
+        let n = self.n;
+        let len = grid.len();
+        let half_inv_h = (0.5 / grid.h) as f32;
+        // Divergence by central differences, then the splat is dropped: the solve peaks at the
+        // splat plus the divergence (16 bytes a node); the transform itself needs 8.
+        let mut div = vec![0f32; len];
+        div.par_chunks_mut(n * n).enumerate().for_each(|(z, slab)| {
+            let zp = (z + 1) % n;
+            let zm = (z + n - 1) % n;
+            let row = |y: usize, z: usize| &v[(z * n + y) * n..(z * n + y + 1) * n];
+            for y in 0..n {
+                let yp = (y + 1) % n;
+                let ym = (y + n - 1) % n;
+                let (r, ryp, rym) = (row(y, z), row(yp, z), row(ym, z));
+                let (rzp, rzm) = (row(y, zp), row(y, zm));
+                for (x, out) in slab[y * n..(y + 1) * n].iter_mut().enumerate() {
+                    let xp = if x + 1 == n { 0 } else { x + 1 };
+                    let xm = if x == 0 { n - 1 } else { x - 1 };
+                    let d =
+                        (r[xp][0] - r[xm][0]) + (ryp[x][1] - rym[x][1]) + (rzp[x][2] - rzm[x][2]);
+                    *out = d * half_inv_h;
+                }
+            }
+        });
+        drop(v);
+        let mut buf: Vec<Complex32> = div.iter().map(|&d| Complex32::new(d, 0.0)).collect();
+        drop(div);
+        fft3(&mut buf, n, &self.fwd);
+        // Apply −G_σ/|k|² (zero at k = 0).
+        let h1 = n / 2 + 1;
+        let fold = |m: usize| if m <= n / 2 { m } else { n - m };
+        buf.par_chunks_mut(n * n).enumerate().for_each(|(z, slab)| {
+            let fz = fold(z) * h1;
+            for y in 0..n {
+                let fzy = (fz + fold(y)) * h1;
+                let row = &mut slab[y * n..(y + 1) * n];
+                for (x, c) in row.iter_mut().enumerate() {
+                    *c *= self.filter[fzy + fold(x)];
+                }
+            }
+        });
+        buf[0] = Complex32::new(0.0, 0.0);
+        fft3(&mut buf, n, &self.inv);
+        let norm = 1.0 / len as f32;
+        buf.iter().map(|c| c.re * norm).collect()
+    }
 }
 
 /// In-place 3D FFT of an `n³` cube (x fastest) with the 1D plan `fft` along each axis.
@@ -279,6 +330,84 @@ mod tests {
         let want = naive_dft3(&data, n);
         for (a, b) in d.iter().zip(&want) {
             assert!((a - b).norm() < 1e-3, "{a} vs {b}");
+        }
+    }
+
+    /// The solve written out node by node (filter evaluated at every frequency), as the
+    /// tabulated [`Solver`] must reproduce it bit for bit.
+    fn reference_solve(grid: &LocalGrid, v: &[[f32; 3]], sigma_vox: f64) -> Vec<f32> {
+        let n = grid.n;
+        let at = |x: usize, y: usize, z: usize| (z * n + y) * n + x;
+        let half_inv_h = (0.5 / grid.h) as f32;
+        let mut buf = vec![Complex32::new(0.0, 0.0); grid.len()];
+        for z in 0..n {
+            for y in 0..n {
+                for x in 0..n {
+                    let (xp, yp, zp) = ((x + 1) % n, (y + 1) % n, (z + 1) % n);
+                    let (xm, ym, zm) = ((x + n - 1) % n, (y + n - 1) % n, (z + n - 1) % n);
+                    let d = (v[at(xp, y, z)][0] - v[at(xm, y, z)][0])
+                        + (v[at(x, yp, z)][1] - v[at(x, ym, z)][1])
+                        + (v[at(x, y, zp)][2] - v[at(x, y, zm)][2]);
+                    buf[at(x, y, z)] = Complex32::new(d * half_inv_h, 0.0);
+                }
+            }
+        }
+        let mut planner = FftPlanner::<f32>::new();
+        fft3(&mut buf, n, &planner.plan_fft_forward(n));
+        let two_pi_over_l = 2.0 * std::f64::consts::PI / (n as f64 * grid.h);
+        let sigma = sigma_vox * grid.h;
+        let k2 = |m: usize| {
+            let s = if m <= n / 2 {
+                m as f64
+            } else {
+                m as f64 - n as f64
+            };
+            (s * two_pi_over_l).powi(2)
+        };
+        for z in 0..n {
+            for y in 0..n {
+                for x in 0..n {
+                    let kk = k2(x) + k2(y) + k2(z);
+                    let c = &mut buf[at(x, y, z)];
+                    if kk == 0.0 {
+                        *c = Complex32::new(0.0, 0.0);
+                    } else {
+                        *c *= -(((-(0.5 * sigma * sigma * kk)).exp() / kk) as f32);
+                    }
+                }
+            }
+        }
+        fft3(&mut buf, n, &planner.plan_fft_inverse(n));
+        let norm = 1.0 / grid.len() as f32;
+        buf.iter().map(|c| c.re * norm).collect()
+    }
+
+    #[test]
+    fn tabulated_solver_matches_the_node_by_node_solve() {
+        for (n, h, sigma) in [(7, 0.3, 1.0), (8, 0.125, 1.5), (12, 2.0, 0.7)] {
+            let grid = LocalGrid {
+                n,
+                h,
+                origin: [-1.0, 0.5, 2.0],
+            };
+            let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+            let mut rnd = || {
+                seed ^= seed << 13;
+                seed ^= seed >> 7;
+                seed ^= seed << 17;
+                (seed >> 40) as f32 / (1u64 << 24) as f32 - 0.5
+            };
+            let v: Vec<[f32; 3]> = (0..grid.len()).map(|_| [rnd(), rnd(), rnd()]).collect();
+            let want = reference_solve(&grid, &v, sigma);
+            let solver = Solver::new(&grid, sigma);
+            // Two solves with one solver: nothing carries over between them.
+            for _ in 0..2 {
+                let got = solver.solve_splatted(&grid, v.clone());
+                assert_eq!(got.len(), want.len());
+                for (i, (g, w)) in got.iter().zip(&want).enumerate() {
+                    assert_eq!(g.to_bits(), w.to_bits(), "n = {n}, node {i}: {g} vs {w}");
+                }
+            }
         }
     }
 

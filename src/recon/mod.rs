@@ -51,7 +51,7 @@ use crate::extract::weld::Welder;
 use crate::io::mesh_write::MeshPlyWriter;
 use crate::store::Store;
 use crate::types::{Aabb, CellKey, Cube, PointBatch, morton3};
-use fft_solve::LocalGrid;
+use fft_solve::{LocalGrid, Solver};
 
 /// Peak bytes per node of a solve: the splatted normals (12) and the divergence (4).
 const COARSE_BYTES_PER_NODE: u64 = 16;
@@ -902,41 +902,72 @@ struct LeafDetail {
     iso_count: u64,
 }
 
-fn solve_leaf(plan: &Plan, key: CellKey, pts: &LeafPoints, coarse: &CoarseField) -> LeafDetail {
-    let fine = plan.leaf_fine_grid(key);
-    let coarse_local = LocalGrid {
+/// The two solvers every leaf uses: its fine grid and its coarse local grid.
+struct LeafSolvers {
+    fine: Solver,
+    coarse: Solver,
+}
+
+impl LeafSolvers {
+    fn new(plan: &Plan) -> LeafSolvers {
+        let fine = plan.leaf_fine_grid(CellKey::new(plan.leaf_level, [0; 3]));
+        LeafSolvers {
+            fine: Solver::new(&fine, plan.sigma_vox),
+            coarse: Solver::new(&leaf_coarse_grid(plan, &fine), plan.sigma_vox),
+        }
+    }
+}
+
+/// A leaf's coarse local grid: its fine grid at the coarse spacing (node `J` on fine node `rJ`).
+fn leaf_coarse_grid(plan: &Plan, fine: &LocalGrid) -> LocalGrid {
+    LocalGrid {
         n: fine.n / plan.r as usize,
         h: fine.h * plan.r as f64,
         origin: fine.origin,
-    };
-    let f = fft_solve::solve(&fine, &pts.pos, &pts.nrm, plan.sigma_vox);
-    let c = fft_solve::solve(&coarse_local, &pts.pos, &pts.nrm, plan.sigma_vox);
+    }
+}
+
+fn solve_leaf(
+    plan: &Plan,
+    solvers: &LeafSolvers,
+    key: CellKey,
+    pts: &LeafPoints,
+    coarse: &CoarseField,
+) -> LeafDetail {
+    let fine = plan.leaf_fine_grid(key);
+    let coarse_local = leaf_coarse_grid(plan, &fine);
+    let f = solvers.fine.solve(&fine, &pts.pos, &pts.nrm);
+    let c = solvers.coarse.solve(&coarse_local, &pts.pos, &pts.nrm);
     let m = plan.detail_n();
-    let half = (plan.e / 2) as i64;
-    let ov = plan.ov as i64;
-    let r = plan.r as i64;
     let nc = coarse_local.n;
+    // Per axis, detail node s sits on fine node q = E/2 − ov + s, between coarse nodes
+    // ⌊q/r⌋ and ⌊q/r⌋ + 1 (clamped) with weights 1 − t and t, t = (q mod r)/r.
+    let r = plan.r as i64;
+    let q0 = (plan.e / 2) as i64 - plan.ov as i64;
+    let axis: Vec<([usize; 2], [f32; 2])> = (0..m as i64)
+        .map(|s| {
+            let q = q0 + s;
+            let j = q.div_euclid(r);
+            let t = q.rem_euclid(r) as f32 / r as f32;
+            let at = |d: i64| (j + d).min(nc as i64 - 1) as usize;
+            ([at(0), at(1)], [1.0 - t, t])
+        })
+        .collect();
     let mut detail = Vec::with_capacity(m * m * m);
-    for sz in 0..m as i64 {
-        for sy in 0..m as i64 {
-            for sx in 0..m as i64 {
-                // Index in the fine local grid.
-                let q = [half - ov + sx, half - ov + sy, half - ov + sz];
-                let fv = f[((q[2] as usize) * fine.n + q[1] as usize) * fine.n + q[0] as usize];
-                // Coarse local, upsampled: coarse node J at fine node rJ.
+    for sz in 0..m {
+        let (iz, wz) = axis[sz];
+        for sy in 0..m {
+            let (iy, wy) = axis[sy];
+            let frow = ((q0 as usize + sz) * fine.n + q0 as usize + sy) * fine.n + q0 as usize;
+            for (sx, &(ix, wx)) in axis.iter().enumerate() {
+                let fv = f[frow + sx];
+                // Coarse local, upsampled trilinearly; zero weights skipped.
                 let mut acc = 0f32;
                 for cc in 0..8 {
-                    let d = [cc & 1, (cc >> 1) & 1, (cc >> 2) & 1];
-                    let mut w = 1f32;
-                    let mut idx = [0usize; 3];
-                    for a in 0..3 {
-                        let j = q[a].div_euclid(r);
-                        let t = q[a].rem_euclid(r) as f32 / r as f32;
-                        w *= if d[a] == 1 { t } else { 1.0 - t };
-                        idx[a] = ((j + d[a]).min(nc as i64 - 1)) as usize;
-                    }
+                    let (dx, dy, dz) = (cc & 1, (cc >> 1) & 1, (cc >> 2) & 1);
+                    let w = wx[dx] * wy[dy] * wz[dz];
                     if w != 0.0 {
-                        acc += w * c[(idx[2] * nc + idx[1]) * nc + idx[0]];
+                        acc += w * c[(iz[dz] * nc + iy[dy]) * nc + ix[dx]];
                     }
                 }
                 detail.push(fv - acc);
@@ -1308,6 +1339,7 @@ pub fn reconstruct(
     let mut refined_set = BTreeSet::new();
     let tol = params.error * m.bounds.diagonal();
     let dm = plan.detail_n();
+    let solvers = LeafSolvers::new(&plan);
     for wave_keys in leaves.chunks(wave) {
         let mut todo = Vec::new();
         for &k in wave_keys {
@@ -1336,7 +1368,7 @@ pub fn reconstruct(
                         let refine =
                             p.own as u64 >= params.min_points && coarse_error(&coarse, p) > tol;
                         let d = if refine {
-                            solve_leaf(&plan, *k, p, &coarse)
+                            solve_leaf(&plan, &solvers, *k, p, &coarse)
                         } else {
                             coarse_only(p, &coarse)
                         };
