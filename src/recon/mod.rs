@@ -500,10 +500,19 @@ impl<'a> PointSource<'a> {
             self.lru.push_back(i);
             return Ok(c);
         }
+        let c = Arc::new(self.load(i)?);
+        self.insert(i, Arc::clone(&c));
+        Ok(c)
+    }
+
+    fn load(&self, i: usize) -> Result<SortedCell> {
         let b = self.store.read_cell(i)?;
-        let c = Arc::new(SortedCell::new(b, &self.plan.cube, self.plan.leaf_level));
+        Ok(SortedCell::new(b, &self.plan.cube, self.plan.leaf_level))
+    }
+
+    fn insert(&mut self, i: usize, c: Arc<SortedCell>) {
         self.bytes += c.bytes();
-        self.cache.insert(i, Arc::clone(&c));
+        self.cache.insert(i, c);
         self.lru.push_back(i);
         while self.bytes > self.cap && self.lru.len() > 1 {
             if let Some(old) = self.lru.pop_front()
@@ -512,7 +521,68 @@ impl<'a> PointSource<'a> {
                 self.bytes -= o.bytes();
             }
         }
-        Ok(c)
+    }
+
+    /// Read and sort the store cells `wanted` that are not cached yet, in parallel on `pool`
+    /// (decompression is most of a cell's cost), as many as half the cache holds; the rest
+    /// are read when asked for. Only speed depends on this, never the points returned.
+    fn preload(&mut self, wanted: &[usize], pool: &rayon::ThreadPool) -> Result<()> {
+        let mut seen = std::collections::HashSet::new();
+        let mut missing = Vec::new();
+        let mut est = 0u64;
+        for &i in wanted {
+            if self.cache.contains_key(&i) || !seen.insert(i) {
+                continue;
+            }
+            // SortedCell::bytes of the cell's points, without colours.
+            est += self.store.manifest.cells[i].count * 36;
+            if est > self.cap / 2 {
+                break;
+            }
+            missing.push(i);
+        }
+        let loaded: Vec<Result<SortedCell>> =
+            pool.install(|| missing.par_iter().map(|&i| self.load(i)).collect());
+        for (i, c) in missing.into_iter().zip(loaded) {
+            self.insert(i, Arc::new(c?));
+        }
+        Ok(())
+    }
+
+    /// The store cells holding leaf-level cells within `margin` of the box `lo..hi` (world).
+    fn cells_near(&self, lo: [f64; 3], hi: [f64; 3], margin: f64) -> Vec<usize> {
+        let lvl = self.plan.leaf_level;
+        let side = 1i64 << lvl;
+        let bx = Aabb { min: lo, max: hi }.grown(margin);
+        let ca = self.plan.cube.cell_coords(bx.min, lvl).map(|v| v as i64);
+        let cb = self.plan.cube.cell_coords(bx.max, lvl).map(|v| v as i64);
+        let mut out = Vec::new();
+        for z in ca[2].max(0)..=cb[2].min(side - 1) {
+            for y in ca[1].max(0)..=cb[1].min(side - 1) {
+                for x in ca[0].max(0)..=cb[0].min(side - 1) {
+                    out.extend(self.covering(CellKey::new(lvl, [x as u32, y as u32, z as u32])));
+                }
+            }
+        }
+        out
+    }
+
+    /// The store cells [`PointSource::gather`] reads for leaf `key`.
+    fn cells_for_leaf(&self, key: CellKey) -> Vec<usize> {
+        let (l, c) = key.decode();
+        let side = 1i64 << l;
+        let mut out = Vec::new();
+        for dz in -1i64..=1 {
+            for dy in -1i64..=1 {
+                for dx in -1i64..=1 {
+                    let q = [c[0] as i64 + dx, c[1] as i64 + dy, c[2] as i64 + dz];
+                    if q.iter().all(|&v| v >= 0 && v < side) {
+                        out.extend(self.covering(CellKey::new(l, q.map(|v| v as u32))));
+                    }
+                }
+            }
+        }
+        out
     }
 
     /// The points (with their colours, when the store has them) within `margin` of the box
@@ -1341,6 +1411,12 @@ pub fn reconstruct(
     let dm = plan.detail_n();
     let solvers = LeafSolvers::new(&plan);
     for wave_keys in leaves.chunks(wave) {
+        let wanted: Vec<usize> = wave_keys
+            .iter()
+            .filter(|&&k| !(params.resume && leaf_path(&leaves_dir, k).exists()))
+            .flat_map(|&k| src.cells_for_leaf(k))
+            .collect();
+        src.preload(&wanted, &ctx.pool)?;
         let mut todo = Vec::new();
         for &k in wave_keys {
             if params.resume && leaf_path(&leaves_dir, k).exists() {
@@ -1354,7 +1430,8 @@ pub fn reconstruct(
             .map(|(_, p)| p.as_ref().map_or(0, |p| p.pos.len() as u64 * 36))
             .sum();
         let _permit = ctx.budget.acquire(
-            (fine_bytes * todo.len() as u64).min(ctx.budget.total() / 3) + pts_bytes,
+            // At most one solve a worker runs at once.
+            fine_bytes * todo.len().min(ctx.threads()) as u64 + pts_bytes,
             "a wave of leaf solves",
         )?;
         let res: Vec<Result<(f64, u64, bool, bool)>> = ctx.pool.install(|| {
@@ -1451,6 +1528,28 @@ pub fn reconstruct(
             t += 1;
         }
         detail_cache.fit(2 * wave_tiles.iter().map(|w| w.2.len()).sum::<usize>());
+        // Read what the wave needs in parallel first: store cells for the fit and colours,
+        // leaf details for the blend.
+        let todo: Vec<&(u64, [i64; 3], Vec<CellKey>)> = wave_tiles
+            .iter()
+            .filter(|w| !(params.resume && tile_path(&tiles_dir, w.0).exists()))
+            .collect();
+        if let Some(src) = near_src.as_ref() {
+            let mut src = src
+                .lock()
+                .map_err(|_| Error::Internal("the colour point source was poisoned".into()))?;
+            let wanted: Vec<usize> = todo
+                .iter()
+                .flat_map(|(_, lo, _)| {
+                    let a = plan.node_pos(*lo);
+                    let b = plan.node_pos(lo.map(|v| v + plan.tile as i64));
+                    src.cells_near(a, b, plan.h * plan.e as f64 * 0.25)
+                })
+                .collect();
+            src.preload(&wanted, &ctx.pool)?;
+        }
+        let keys: Vec<CellKey> = todo.iter().flat_map(|w| w.2.iter().copied()).collect();
+        detail_cache.prefetch(&keys, &ctx.pool)?;
         let mut loaded = Vec::with_capacity(wave_tiles.len());
         let mut near_pts: Vec<Option<NearPoints>> = Vec::with_capacity(wave_tiles.len());
         for (tt, lo, near) in &wave_tiles {
@@ -1902,6 +2001,47 @@ impl DetailCache {
                 self.map.remove(&old);
             }
         }
+    }
+
+    /// Make the details of `keys` resident: those cached become the most recently used, the
+    /// others are read and quantised in parallel on `pool` (as many as the cache holds), after
+    /// evicting the least recently used to make room. Only speed depends on this.
+    fn prefetch(&mut self, keys: &[CellKey], pool: &rayon::ThreadPool) -> Result<()> {
+        let mut seen = std::collections::HashSet::new();
+        let mut missing = Vec::new();
+        for &k in keys {
+            if !seen.insert(k) {
+                continue;
+            }
+            if self.map.contains_key(&k) {
+                if let Some(at) = self.lru.iter().position(|&j| j == k) {
+                    self.lru.remove(at);
+                }
+                self.lru.push_back(k);
+            } else if missing.len() < self.cap_entries {
+                missing.push(k);
+            }
+        }
+        while self.lru.len() + missing.len() > self.cap_entries {
+            match self.lru.pop_front() {
+                Some(old) => {
+                    self.map.remove(&old);
+                }
+                None => break,
+            }
+        }
+        let (dir, m, unit) = (&self.dir, self.m, self.unit);
+        let loaded: Vec<Result<Detail>> = pool.install(|| {
+            missing
+                .par_iter()
+                .map(|&k| Ok(quantise_detail(&read_leaf(dir, k, m)?.detail, unit)))
+                .collect()
+        });
+        for (k, d) in missing.into_iter().zip(loaded) {
+            self.map.insert(k, Arc::new(d?));
+            self.lru.push_back(k);
+        }
+        Ok(())
     }
 
     /// Leaf `k`'s detail in fixed point.
