@@ -46,7 +46,9 @@ use serde::{Deserialize, Serialize};
 use crate::error::{Error, IoContext, Result};
 use crate::exec::Ctx;
 use crate::extract::cpu::{GridGeom, TileMesh, marching_cubes};
-use crate::extract::field::{Axis, Blend, Detail, Leaf, quantise, quantise_detail, unit_for};
+use crate::extract::field::{
+    Axis, Blend, Detail, Leaf, MAX_SHIFT, quantise, quantise_detail, unit_for,
+};
 use crate::extract::weld::Welder;
 use crate::io::mesh_write::MeshPlyWriter;
 use crate::store::Store;
@@ -965,9 +967,11 @@ struct LeafPoints {
     own: usize,
 }
 
-/// A leaf's detail grid and its share of the iso-value.
+/// A leaf's detail grid in the blend's fixed point (none for a leaf left to the coarse
+/// solution) and its share of the iso-value.
+#[derive(Debug)]
 struct LeafDetail {
-    detail: Vec<f32>,
+    detail: Option<Detail>,
     iso_sum: f64,
     iso_count: u64,
 }
@@ -999,6 +1003,7 @@ fn leaf_coarse_grid(plan: &Plan, fine: &LocalGrid) -> LocalGrid {
 
 fn solve_leaf(
     plan: &Plan,
+    unit: f32,
     solvers: &LeafSolvers,
     key: CellKey,
     pts: &LeafPoints,
@@ -1049,7 +1054,7 @@ fn solve_leaf(
         iso_sum += coarse.eval(*p) + fine.eval(&f, *p) - coarse_local.eval(&c, *p);
     }
     LeafDetail {
-        detail,
+        detail: Some(quantise_detail(&detail, unit)),
         iso_sum,
         iso_count: pts.own as u64,
     }
@@ -1091,25 +1096,38 @@ fn coarse_error(coarse: &CoarseField, pts: &LeafPoints) -> f64 {
 /// A leaf left to the coarse solution: no detail, its samples' share of the iso-value.
 fn coarse_only(pts: &LeafPoints, coarse: &CoarseField) -> LeafDetail {
     LeafDetail {
-        detail: Vec::new(),
+        detail: None,
         iso_sum: pts.pos[..pts.own].iter().map(|p| coarse.eval(*p)).sum(),
         iso_count: pts.own as u64,
     }
 }
 
-const LEAF_MAGIC: &[u8; 8] = b"SFLEAF01";
+/// Leaf checkpoints: this magic, the cell key, the iso sum (f64) and count (u64), the detail's
+/// exponent (u32) and a flag (u32: 1 with a detail), then the detail's 16-bit values
+/// ([`quantise_detail`], padded to even), all little-endian, zstd-compressed.
+const LEAF_MAGIC: &[u8; 8] = b"SFLEAF02";
+const LEAF_HEADER: usize = 40;
 
 fn leaf_path(dir: &Path, key: CellKey) -> PathBuf {
     dir.join(format!("{}.zst", key.file_name()))
 }
 
+/// Values of a detail grid of `m³` nodes, padded to even.
+fn detail_len(m: usize) -> usize {
+    let n = m * m * m;
+    n + n % 2
+}
+
 fn write_leaf(dir: &Path, key: CellKey, d: &LeafDetail) -> Result<()> {
-    let mut raw = Vec::with_capacity(32 + d.detail.len() * 4);
+    let values = d.detail.as_ref().map_or(&[][..], |d| &d.values[..]);
+    let mut raw = Vec::with_capacity(LEAF_HEADER + values.len() * 2);
     raw.extend_from_slice(LEAF_MAGIC);
     raw.extend_from_slice(&key.0.to_le_bytes());
     raw.extend_from_slice(&d.iso_sum.to_le_bytes());
     raw.extend_from_slice(&d.iso_count.to_le_bytes());
-    for v in &d.detail {
+    raw.extend_from_slice(&d.detail.as_ref().map_or(0u32, |d| d.shift).to_le_bytes());
+    raw.extend_from_slice(&(d.detail.is_some() as u32).to_le_bytes());
+    for v in values {
         raw.extend_from_slice(&v.to_le_bytes());
     }
     let z = zstd::bulk::compress(&raw, 1)
@@ -1128,31 +1146,66 @@ fn read_leaf(dir: &Path, key: CellKey, m: usize) -> Result<LeafDetail> {
     std::fs::File::open(&path)
         .and_then(|mut f| f.read_to_end(&mut z))
         .with_path(&path)?;
-    let raw = zstd::bulk::decompress(&z, 32 + m * m * m * 4 + 16)
+    let n = detail_len(m);
+    let raw = zstd::bulk::decompress(&z, LEAF_HEADER + n * 2 + 16)
         .map_err(|e| Error::input(&path, format!("corrupt leaf checkpoint: {e}")))?;
-    let full = raw.len() == 32 + m * m * m * 4;
-    if !(full || raw.len() == 32) || &raw[..8] != LEAF_MAGIC {
+    if raw.len() >= 8 && raw[..6] == LEAF_MAGIC[..6] && raw[..8] != LEAF_MAGIC[..] {
         return Err(Error::input(
             &path,
-            "corrupt leaf checkpoint: wrong size or magic",
+            format!(
+                "leaf checkpoint written by another version of scanflow ({}; this one reads {}): run again without --resume in a new work directory",
+                String::from_utf8_lossy(&raw[..8]),
+                String::from_utf8_lossy(LEAF_MAGIC)
+            ),
         ));
     }
+    let u32_at = |o: usize| u32::from_le_bytes([raw[o], raw[o + 1], raw[o + 2], raw[o + 3]]);
     let u64_at = |o: usize| {
         let mut a = [0u8; 8];
         a.copy_from_slice(&raw[o..o + 8]);
         u64::from_le_bytes(a)
     };
+    if raw.len() < LEAF_HEADER || raw[..8] != LEAF_MAGIC[..] {
+        return Err(Error::input(
+            &path,
+            "corrupt leaf checkpoint: wrong size or magic",
+        ));
+    }
+    let (shift, has) = (u32_at(32), u32_at(36));
+    let want = LEAF_HEADER + if has == 1 { n * 2 } else { 0 };
+    if has > 1 || raw.len() != want || shift > MAX_SHIFT {
+        return Err(Error::input(
+            &path,
+            format!(
+                "corrupt leaf checkpoint: {} bytes with detail flag {has} and exponent {shift}, expected {want} bytes and an exponent of at most {MAX_SHIFT}",
+                raw.len()
+            ),
+        ));
+    }
     if u64_at(8) != key.0 {
         return Err(Error::input(&path, "leaf checkpoint of another cell"));
     }
-    let detail = raw[32..]
-        .chunks_exact(4)
-        .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-        .collect();
+    let detail = (has == 1).then(|| Detail {
+        values: raw[LEAF_HEADER..]
+            .chunks_exact(2)
+            .map(|b| i16::from_le_bytes([b[0], b[1]]))
+            .collect(),
+        shift,
+    });
     Ok(LeafDetail {
         detail,
         iso_sum: f64::from_bits(u64_at(16)),
         iso_count: u64_at(24),
+    })
+}
+
+/// The detail of refined leaf `key` (the tile stage reads only those).
+fn leaf_detail(dir: &Path, key: CellKey, m: usize) -> Result<Detail> {
+    read_leaf(dir, key, m)?.detail.ok_or_else(|| {
+        Error::input(
+            leaf_path(dir, key),
+            "leaf checkpoint without a detail, where the run refined this leaf",
+        )
     })
 }
 
@@ -1410,6 +1463,9 @@ pub fn reconstruct(
     let tol = params.error * m.bounds.diagonal();
     let dm = plan.detail_n();
     let solvers = LeafSolvers::new(&plan);
+    // Fixed point for the blend (`extract::field`): the coarse values within 2^21 units;
+    // leaf details are stored in it.
+    let unit = unit_for(coarse.max_abs());
     for wave_keys in leaves.chunks(wave) {
         let wanted: Vec<usize> = wave_keys
             .iter()
@@ -1439,18 +1495,18 @@ pub fn reconstruct(
                 .map(|(k, pts)| match pts {
                     None => {
                         let d = read_leaf(&leaves_dir, *k, dm)?;
-                        Ok((d.iso_sum, d.iso_count, true, !d.detail.is_empty()))
+                        Ok((d.iso_sum, d.iso_count, true, d.detail.is_some()))
                     }
                     Some(p) => {
                         let refine =
                             p.own as u64 >= params.min_points && coarse_error(&coarse, p) > tol;
                         let d = if refine {
-                            solve_leaf(&plan, &solvers, *k, p, &coarse)
+                            solve_leaf(&plan, unit, &solvers, *k, p, &coarse)
                         } else {
                             coarse_only(p, &coarse)
                         };
                         write_leaf(&leaves_dir, *k, &d)?;
-                        Ok((d.iso_sum, d.iso_count, false, !d.detail.is_empty()))
+                        Ok((d.iso_sum, d.iso_count, false, d.detail.is_some()))
                     }
                 })
                 .collect()
@@ -1481,8 +1537,6 @@ pub fn reconstruct(
     let ntiles_axis = plan.n / plan.tile;
     let tiles_total = ntiles_axis.pow(3);
     let own = pou::leaf_weights(plan.e as i64, plan.ov as i64);
-    // Fixed point for the blend (`extract::field`): the coarse values within 2^21 units.
-    let unit = unit_for(coarse.max_abs());
     let geom = GridGeom {
         origin: plan.cube.origin,
         h: plan.h,
@@ -1501,7 +1555,7 @@ pub fn reconstruct(
     // the budget.
     let detail_cap = ctx.budget.total() / 6;
     let mut gpu_totals = GpuTotals::default();
-    let mut detail_cache = DetailCache::new(&leaves_dir, dm, unit, detail_cap);
+    let mut detail_cache = DetailCache::new(&leaves_dir, dm, detail_cap);
     let _detail_permit = ctx.budget.acquire(detail_cap, "the leaf detail cache")?;
     let tile_nodes = (plan.tile + 1).pow(3);
     let stage = ctx.progress.stage("tiles", Some(tiles_total), "tiles");
@@ -1967,7 +2021,6 @@ impl GpuTotals {
 struct DetailCache {
     dir: PathBuf,
     m: usize,
-    unit: f32,
     map: HashMap<CellKey, Arc<Detail>>,
     lru: VecDeque<CellKey>,
     cap_entries: usize,
@@ -1975,13 +2028,12 @@ struct DetailCache {
 }
 
 impl DetailCache {
-    fn new(dir: &Path, m: usize, unit: f32, cap_bytes: u64) -> DetailCache {
+    fn new(dir: &Path, m: usize, cap_bytes: u64) -> DetailCache {
         // 16-bit details (`quantise_detail`).
         let per = (m * m * m * 2) as u64;
         DetailCache {
             dir: dir.to_path_buf(),
             m,
-            unit,
             map: HashMap::new(),
             lru: VecDeque::new(),
             cap_entries: ((cap_bytes / per.max(1)) as usize).max(64),
@@ -2030,11 +2082,11 @@ impl DetailCache {
                 None => break,
             }
         }
-        let (dir, m, unit) = (&self.dir, self.m, self.unit);
+        let (dir, m) = (&self.dir, self.m);
         let loaded: Vec<Result<Detail>> = pool.install(|| {
             missing
                 .par_iter()
-                .map(|&k| Ok(quantise_detail(&read_leaf(dir, k, m)?.detail, unit)))
+                .map(|&k| leaf_detail(dir, k, m))
                 .collect()
         });
         for (k, d) in missing.into_iter().zip(loaded) {
@@ -2049,10 +2101,7 @@ impl DetailCache {
         if let Some(d) = self.map.get(&k) {
             return Ok(Arc::clone(d));
         }
-        let d = Arc::new(quantise_detail(
-            &read_leaf(&self.dir, k, self.m)?.detail,
-            self.unit,
-        ));
+        let d = Arc::new(leaf_detail(&self.dir, k, self.m)?);
         self.map.insert(k, Arc::clone(&d));
         self.lru.push_back(k);
         self.evict();
@@ -2103,6 +2152,62 @@ pub fn global_solve(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn leaf_checkpoints_round_trip_and_bad_ones_are_named() {
+        let dir = tempfile::tempdir().unwrap();
+        let m = 5;
+        let key = CellKey::new(3, [1, 2, 3]);
+        let raw: Vec<f32> = (0..m * m * m).map(|i| (i as f32 - 60.0) * 0.37).collect();
+        let refined = LeafDetail {
+            detail: Some(quantise_detail(&raw, 1.0 / 64.0)),
+            iso_sum: -12.5,
+            iso_count: 7,
+        };
+        write_leaf(dir.path(), key, &refined).unwrap();
+        let back = read_leaf(dir.path(), key, m).unwrap();
+        assert_eq!(back.detail, refined.detail);
+        assert_eq!((back.iso_sum, back.iso_count), (-12.5, 7));
+        assert_eq!(
+            leaf_detail(dir.path(), key, m).unwrap(),
+            refined.detail.unwrap()
+        );
+        // A leaf left to the coarse solution: no detail, which the tile stage must not read.
+        let plain = CellKey::new(3, [0, 0, 0]);
+        let coarse = LeafDetail {
+            detail: None,
+            iso_sum: 1.0,
+            iso_count: 2,
+        };
+        write_leaf(dir.path(), plain, &coarse).unwrap();
+        assert!(read_leaf(dir.path(), plain, m).unwrap().detail.is_none());
+        let e = leaf_detail(dir.path(), plain, m).unwrap_err().to_string();
+        assert!(e.contains("without a detail") && e.contains(".zst"), "{e}");
+        // Bad files: another grid size, another cell, an older format, garbage.
+        let e = read_leaf(dir.path(), key, m + 1).unwrap_err().to_string();
+        assert!(
+            e.contains("corrupt leaf checkpoint") && e.contains("expected"),
+            "{e}"
+        );
+        std::fs::copy(leaf_path(dir.path(), key), leaf_path(dir.path(), plain)).unwrap();
+        let e = read_leaf(dir.path(), plain, m).unwrap_err().to_string();
+        assert!(e.contains("another cell"), "{e}");
+        let mut old = b"SFLEAF01".to_vec();
+        old.extend_from_slice(&[0; 24]);
+        std::fs::write(
+            leaf_path(dir.path(), key),
+            zstd::bulk::compress(&old, 1).unwrap(),
+        )
+        .unwrap();
+        let e = read_leaf(dir.path(), key, m).unwrap_err().to_string();
+        assert!(
+            e.contains("another version of scanflow") && e.contains("SFLEAF01"),
+            "{e}"
+        );
+        std::fs::write(leaf_path(dir.path(), key), b"not zstd").unwrap();
+        let e = read_leaf(dir.path(), key, m).unwrap_err().to_string();
+        assert!(e.contains("corrupt leaf checkpoint"), "{e}");
+    }
 
     #[test]
     fn point_grid_finds_the_exact_nearest_points() {
