@@ -1036,14 +1036,12 @@ fn solve_leaf(
             let frow = ((q0 as usize + sz) * fine.n + q0 as usize + sy) * fine.n + q0 as usize;
             for (sx, &(ix, wx)) in axis.iter().enumerate() {
                 let fv = f[frow + sx];
-                // Coarse local, upsampled trilinearly; zero weights skipped.
+                // Coarse local, upsampled trilinearly (a zero weight adds a zero).
                 let mut acc = 0f32;
                 for cc in 0..8 {
                     let (dx, dy, dz) = (cc & 1, (cc >> 1) & 1, (cc >> 2) & 1);
                     let w = wx[dx] * wy[dy] * wz[dz];
-                    if w != 0.0 {
-                        acc += w * c[(iz[dz] * nc + iy[dy]) * nc + ix[dx]];
-                    }
+                    acc += w * c[(iz[dz] * nc + iy[dy]) * nc + ix[dx]];
                 }
                 detail.push(fv - acc);
             }
