@@ -47,8 +47,9 @@ impl LocalGrid {
     }
 
     /// Bytes of scratch [`solve`] needs at its peak: the splatted normals (12 bytes a node)
-    /// and their divergence (4); the complex transform buffer (8) comes after the splat is
-    /// dropped, the result (4) after the divergence is. Plus the [`Solver`]'s filter table.
+    /// and their divergence (4). After the splat is dropped, the transform holds at most two
+    /// half spectra (`n²·(n/2 + 1)` complex values each, about 4 bytes a node), or one and
+    /// the divergence or the result. Plus the [`Solver`]'s filter table.
     pub fn scratch_bytes(&self) -> u64 {
         let h1 = (self.n / 2 + 1) as u64;
         self.len() as u64 * 16 + h1 * h1 * h1 * 4
