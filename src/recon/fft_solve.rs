@@ -208,7 +208,7 @@ impl Solver {
         let len = grid.len();
         let half_inv_h = (0.5 / grid.h) as f32;
         // Divergence by central differences, then the splat is dropped: the solve peaks at the
-        // splat plus the divergence (16 bytes a node); the transform itself needs 8.
+        // splat plus the divergence (16 bytes a node); the transform itself needs about 8.
         let mut div = vec![0f32; len];
         div.par_chunks_mut(n * n).enumerate().for_each(|(z, slab)| {
             let zp = (z + 1) % n;

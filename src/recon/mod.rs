@@ -551,35 +551,35 @@ impl<'a> PointSource<'a> {
         Ok(())
     }
 
-    /// The store cells holding leaf-level cells within `margin` of the box `lo..hi` (world).
-    fn cells_near(&self, lo: [f64; 3], hi: [f64; 3], margin: f64) -> Vec<usize> {
+    /// The leaf-level cells meeting box `bx` (world), z slowest.
+    fn keys_in(&self, bx: &Aabb) -> Vec<CellKey> {
         let lvl = self.plan.leaf_level;
         let side = 1i64 << lvl;
-        let bx = Aabb { min: lo, max: hi }.grown(margin);
         let ca = self.plan.cube.cell_coords(bx.min, lvl).map(|v| v as i64);
         let cb = self.plan.cube.cell_coords(bx.max, lvl).map(|v| v as i64);
         let mut out = Vec::new();
         for z in ca[2].max(0)..=cb[2].min(side - 1) {
             for y in ca[1].max(0)..=cb[1].min(side - 1) {
                 for x in ca[0].max(0)..=cb[0].min(side - 1) {
-                    out.extend(self.covering(CellKey::new(lvl, [x as u32, y as u32, z as u32])));
+                    out.push(CellKey::new(lvl, [x as u32, y as u32, z as u32]));
                 }
             }
         }
         out
     }
 
-    /// The store cells [`PointSource::gather`] reads for leaf `key`.
-    fn cells_for_leaf(&self, key: CellKey) -> Vec<usize> {
+    /// Leaf `key` and its neighbours sharing a face, edge or corner, within the cube, z
+    /// slowest.
+    fn neighbours(key: CellKey) -> Vec<CellKey> {
         let (l, c) = key.decode();
         let side = 1i64 << l;
-        let mut out = Vec::new();
+        let mut out = Vec::with_capacity(27);
         for dz in -1i64..=1 {
             for dy in -1i64..=1 {
                 for dx in -1i64..=1 {
                     let q = [c[0] as i64 + dx, c[1] as i64 + dy, c[2] as i64 + dz];
                     if q.iter().all(|&v| v >= 0 && v < side) {
-                        out.extend(self.covering(CellKey::new(l, q.map(|v| v as u32))));
+                        out.push(CellKey::new(l, q.map(|v| v as u32)));
                     }
                 }
             }
@@ -587,33 +587,42 @@ impl<'a> PointSource<'a> {
         out
     }
 
+    /// The store cells [`PointSource::near_points`] reads first for the box `lo..hi` and
+    /// `margin`.
+    fn cells_near(&self, lo: [f64; 3], hi: [f64; 3], margin: f64) -> Vec<usize> {
+        let bx = Aabb { min: lo, max: hi }.grown(margin);
+        self.keys_in(&bx)
+            .into_iter()
+            .flat_map(|k| self.covering(k))
+            .collect()
+    }
+
+    /// The store cells [`PointSource::gather`] reads for leaf `key`.
+    fn cells_for_leaf(&self, key: CellKey) -> Vec<usize> {
+        Self::neighbours(key)
+            .into_iter()
+            .flat_map(|k| self.covering(k))
+            .collect()
+    }
+
     /// The points (with their colours, when the store has them) within `margin` of the box
     /// `lo..hi` (world), widening the margin (doubling, up to 6 times) while none is found.
     fn near_points(&mut self, lo: [f64; 3], hi: [f64; 3], margin: f64) -> Result<NearPoints> {
         let mut out = NearPoints::default();
-        let lvl = self.plan.leaf_level;
-        let side = 1i64 << lvl;
         let mut m = margin;
         for _ in 0..7 {
             let bx = Aabb { min: lo, max: hi }.grown(m);
-            let ca = self.plan.cube.cell_coords(bx.min, lvl).map(|v| v as i64);
-            let cb = self.plan.cube.cell_coords(bx.max, lvl).map(|v| v as i64);
-            for z in ca[2].max(0)..=cb[2].min(side - 1) {
-                for y in ca[1].max(0)..=cb[1].min(side - 1) {
-                    for x in ca[0].max(0)..=cb[0].min(side - 1) {
-                        let k = CellKey::new(lvl, [x as u32, y as u32, z as u32]);
-                        for si in self.covering(k) {
-                            let sc = self.cell(si)?;
-                            let (s0, e0) = sc.range(k);
-                            for j in s0..e0 {
-                                let p = sc.pos[j];
-                                if bx.contains(p) {
-                                    out.pos.push(p);
-                                    let c = sc.col.get(j).copied().unwrap_or([0; 4]);
-                                    out.col.push([c[0], c[1], c[2]]);
-                                    out.inten.push(sc.inten.get(j).copied().unwrap_or(0.0));
-                                }
-                            }
+            for k in self.keys_in(&bx) {
+                for si in self.covering(k) {
+                    let sc = self.cell(si)?;
+                    let (s0, e0) = sc.range(k);
+                    for j in s0..e0 {
+                        let p = sc.pos[j];
+                        if bx.contains(p) {
+                            out.pos.push(p);
+                            let c = sc.col.get(j).copied().unwrap_or([0; 4]);
+                            out.col.push([c[0], c[1], c[2]]);
+                            out.inten.push(sc.inten.get(j).copied().unwrap_or(0.0));
                         }
                     }
                 }
@@ -631,33 +640,22 @@ impl<'a> PointSource<'a> {
     /// The points of leaf `key`'s 1.8× box, and how many of them (the first ones) lie in the
     /// cell itself.
     fn gather(&mut self, key: CellKey) -> Result<LeafPoints> {
-        let (l, c) = key.decode();
-        let side = 1i64 << l;
         let cell_box = self.plan.cube.cell_box(key);
         // The 1.8× box: 0.4 of the edge beyond each face.
         let reach = cell_box.grown(0.4 * (cell_box.max[0] - cell_box.min[0]));
         let mut own = LeafPoints::default();
         let mut rest = LeafPoints::default();
-        for dz in -1i64..=1 {
-            for dy in -1i64..=1 {
-                for dx in -1i64..=1 {
-                    let q = [c[0] as i64 + dx, c[1] as i64 + dy, c[2] as i64 + dz];
-                    if q.iter().any(|&v| v < 0 || v >= side) {
-                        continue;
-                    }
-                    let nk = CellKey::new(l, q.map(|v| v as u32));
-                    let is_own = nk == key;
-                    for si in self.covering(nk) {
-                        let sc = self.cell(si)?;
-                        let (s, e) = sc.range(nk);
-                        for j in s..e {
-                            let p = sc.pos[j];
-                            if reach.contains(p) {
-                                let dst = if is_own { &mut own } else { &mut rest };
-                                dst.pos.push(p);
-                                dst.nrm.push(sc.nrm[j]);
-                            }
-                        }
+        for nk in Self::neighbours(key) {
+            let is_own = nk == key;
+            for si in self.covering(nk) {
+                let sc = self.cell(si)?;
+                let (s, e) = sc.range(nk);
+                for j in s..e {
+                    let p = sc.pos[j];
+                    if reach.contains(p) {
+                        let dst = if is_own { &mut own } else { &mut rest };
+                        dst.pos.push(p);
+                        dst.nrm.push(sc.nrm[j]);
                     }
                 }
             }
@@ -1465,15 +1463,21 @@ pub fn reconstruct(
     // leaf details are stored in it.
     let unit = unit_for(coarse.max_abs());
     for wave_keys in leaves.chunks(wave) {
+        // Leaves a resumed run checkpointed already are read back, the others solved.
+        let done: Vec<bool> = wave_keys
+            .iter()
+            .map(|&k| params.resume && leaf_path(&leaves_dir, k).exists())
+            .collect();
         let wanted: Vec<usize> = wave_keys
             .iter()
-            .filter(|&&k| !(params.resume && leaf_path(&leaves_dir, k).exists()))
-            .flat_map(|&k| src.cells_for_leaf(k))
+            .zip(&done)
+            .filter(|(_, done)| !**done)
+            .flat_map(|(&k, _)| src.cells_for_leaf(k))
             .collect();
         src.preload(&wanted, &ctx.pool)?;
         let mut todo = Vec::new();
-        for &k in wave_keys {
-            if params.resume && leaf_path(&leaves_dir, k).exists() {
+        for (&k, &done) in wave_keys.iter().zip(&done) {
+            if done {
                 todo.push((k, None));
             } else {
                 todo.push((k, Some(src.gather(k)?)));
@@ -1580,12 +1584,25 @@ pub fn reconstruct(
             t += 1;
         }
         detail_cache.fit(2 * wave_tiles.iter().map(|w| w.2.len()).sum::<usize>());
-        // Read what the wave needs in parallel first: store cells for the fit and colours,
-        // leaf details for the blend.
+        // Tiles a resumed run checkpointed already are read back, the others extracted.
+        let done: Vec<bool> = wave_tiles
+            .iter()
+            .map(|w| params.resume && tile_path(&tiles_dir, w.0).exists())
+            .collect();
         let todo: Vec<&(u64, [i64; 3], Vec<CellKey>)> = wave_tiles
             .iter()
-            .filter(|w| !(params.resume && tile_path(&tiles_dir, w.0).exists()))
+            .zip(&done)
+            .filter(|(_, done)| !**done)
+            .map(|(w, _)| w)
             .collect();
+        // The box whose points a tile's fit and colours read: the tile and a margin.
+        let near_box = |lo: [i64; 3]| {
+            let a = plan.node_pos(lo);
+            let b = plan.node_pos(lo.map(|v| v + plan.tile as i64));
+            (a, b, plan.h * plan.e as f64 * 0.25)
+        };
+        // Read what the wave needs in parallel first: store cells for the fit and colours,
+        // leaf details for the blend.
         if let Some(src) = near_src.as_ref() {
             let mut src = src
                 .lock()
@@ -1593,9 +1610,8 @@ pub fn reconstruct(
             let wanted: Vec<usize> = todo
                 .iter()
                 .flat_map(|(_, lo, _)| {
-                    let a = plan.node_pos(*lo);
-                    let b = plan.node_pos(lo.map(|v| v + plan.tile as i64));
-                    src.cells_near(a, b, plan.h * plan.e as f64 * 0.25)
+                    let (a, b, margin) = near_box(*lo);
+                    src.cells_near(a, b, margin)
                 })
                 .collect();
             src.preload(&wanted, &ctx.pool)?;
@@ -1604,8 +1620,8 @@ pub fn reconstruct(
         detail_cache.prefetch(&keys, &ctx.pool)?;
         let mut loaded = Vec::with_capacity(wave_tiles.len());
         let mut near_pts: Vec<Option<NearPoints>> = Vec::with_capacity(wave_tiles.len());
-        for (tt, lo, near) in &wave_tiles {
-            if params.resume && tile_path(&tiles_dir, *tt).exists() {
+        for ((tt, lo, near), &done) in wave_tiles.iter().zip(&done) {
+            if done {
                 loaded.push((*tt, *lo, None));
                 near_pts.push(None);
                 continue;
@@ -1615,9 +1631,8 @@ pub fn reconstruct(
                     let mut src = src.lock().map_err(|_| {
                         Error::Internal("the colour point source was poisoned".into())
                     })?;
-                    let a = plan.node_pos(*lo);
-                    let b = plan.node_pos(lo.map(|v| v + plan.tile as i64));
-                    Some(src.near_points(a, b, plan.h * plan.e as f64 * 0.25)?)
+                    let (a, b, margin) = near_box(*lo);
+                    Some(src.near_points(a, b, margin)?)
                 }
                 None => None,
             });
@@ -2046,7 +2061,12 @@ impl DetailCache {
     }
 
     fn evict(&mut self) {
-        while self.lru.len() > self.cap_entries {
+        self.evict_to(self.cap_entries);
+    }
+
+    /// Drop the least recently used entries until at most `keep` remain.
+    fn evict_to(&mut self, keep: usize) {
+        while self.lru.len() > keep {
             if let Some(old) = self.lru.pop_front() {
                 self.map.remove(&old);
             }
@@ -2054,8 +2074,8 @@ impl DetailCache {
     }
 
     /// Make the details of `keys` resident: those cached become the most recently used, the
-    /// others are read and quantised in parallel on `pool` (as many as the cache holds), after
-    /// evicting the least recently used to make room. Only speed depends on this.
+    /// others are read in parallel on `pool` (as many as the cache holds), after evicting the
+    /// least recently used to make room. Only speed depends on this.
     fn prefetch(&mut self, keys: &[CellKey], pool: &rayon::ThreadPool) -> Result<()> {
         let mut seen = std::collections::HashSet::new();
         let mut missing = Vec::new();
@@ -2072,14 +2092,7 @@ impl DetailCache {
                 missing.push(k);
             }
         }
-        while self.lru.len() + missing.len() > self.cap_entries {
-            match self.lru.pop_front() {
-                Some(old) => {
-                    self.map.remove(&old);
-                }
-                None => break,
-            }
-        }
+        self.evict_to(self.cap_entries - missing.len());
         let (dir, m) = (&self.dir, self.m);
         let loaded: Vec<Result<Detail>> = pool.install(|| {
             missing
