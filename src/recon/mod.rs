@@ -587,6 +587,26 @@ impl<'a> PointSource<'a> {
         out
     }
 
+    /// Call `f(cell, j)` for each point `j` of leaf-level cell `k` that lies in `bx`, in the
+    /// store's order.
+    fn visit(
+        &mut self,
+        k: CellKey,
+        bx: &Aabb,
+        mut f: impl FnMut(&SortedCell, usize),
+    ) -> Result<()> {
+        for si in self.covering(k) {
+            let sc = self.cell(si)?;
+            let (s, e) = sc.range(k);
+            for j in s..e {
+                if bx.contains(sc.pos[j]) {
+                    f(&sc, j);
+                }
+            }
+        }
+        Ok(())
+    }
+
     /// The store cells [`PointSource::near_points`] reads first for the box `lo..hi` and
     /// `margin`.
     fn cells_near(&self, lo: [f64; 3], hi: [f64; 3], margin: f64) -> Vec<usize> {
@@ -613,19 +633,12 @@ impl<'a> PointSource<'a> {
         for _ in 0..7 {
             let bx = Aabb { min: lo, max: hi }.grown(m);
             for k in self.keys_in(&bx) {
-                for si in self.covering(k) {
-                    let sc = self.cell(si)?;
-                    let (s0, e0) = sc.range(k);
-                    for j in s0..e0 {
-                        let p = sc.pos[j];
-                        if bx.contains(p) {
-                            out.pos.push(p);
-                            let c = sc.col.get(j).copied().unwrap_or([0; 4]);
-                            out.col.push([c[0], c[1], c[2]]);
-                            out.inten.push(sc.inten.get(j).copied().unwrap_or(0.0));
-                        }
-                    }
-                }
+                self.visit(k, &bx, |sc, j| {
+                    out.pos.push(sc.pos[j]);
+                    let c = sc.col.get(j).copied().unwrap_or([0; 4]);
+                    out.col.push([c[0], c[1], c[2]]);
+                    out.inten.push(sc.inten.get(j).copied().unwrap_or(0.0));
+                })?;
             }
             out.lo = bx.min;
             out.hi = bx.max;
@@ -646,19 +659,11 @@ impl<'a> PointSource<'a> {
         let mut own = LeafPoints::default();
         let mut rest = LeafPoints::default();
         for nk in Self::neighbours(key) {
-            let is_own = nk == key;
-            for si in self.covering(nk) {
-                let sc = self.cell(si)?;
-                let (s, e) = sc.range(nk);
-                for j in s..e {
-                    let p = sc.pos[j];
-                    if reach.contains(p) {
-                        let dst = if is_own { &mut own } else { &mut rest };
-                        dst.pos.push(p);
-                        dst.nrm.push(sc.nrm[j]);
-                    }
-                }
-            }
+            let dst = if nk == key { &mut own } else { &mut rest };
+            self.visit(nk, &reach, |sc, j| {
+                dst.pos.push(sc.pos[j]);
+                dst.nrm.push(sc.nrm[j]);
+            })?;
         }
         own.own = own.pos.len();
         own.pos.extend(rest.pos);
