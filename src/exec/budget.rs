@@ -4,11 +4,71 @@
 //! [`Permit`] that gives the bytes back when dropped. A request that does not fit now waits on
 //! a condition variable until permits are returned; it never polls. A request larger than the
 //! whole budget can never fit and is an error that names both sizes.
+//!
+//! How the budget is shared is written once, in [`Share`]: every long-lived consumer (a cache,
+//! a counting grid, a wave of buffers) takes its slice through [`Budget::share`], so the
+//! slices of one stage can be read and summed in one place.
 
 use std::sync::{Arc, Condvar, Mutex};
 
 use crate::error::{Error, Result};
 use crate::exec::human_bytes;
+
+/// The slices of the budget that long-lived consumers size themselves by, as divisors of the
+/// whole. Slices of one stage may be live at once, so within a stage they add up to at most
+/// the whole; what remains is admitted per task (a solve, a tile, a chunk) through permits.
+///
+/// | stage | consumer | slice |
+/// | --- | --- | --- |
+/// | ingest | point chunks of a read wave | 1/2 |
+/// | ingest | the counting grid (two copies while merging) | 1/4 |
+/// | ingest | scatter buffers before a flush | 1/8 |
+/// | normals | the cache of decoded neighbour cells | 1/4 |
+/// | normals | the cells of one estimation wave | 1/3 |
+/// | reconstruct | the coarse grid (picks the coarse ratio) | 1/3 |
+/// | reconstruct | the cache of sorted store cells (at most 128 MiB) | 1/4 |
+/// | reconstruct | the cache of leaf details read back for tiles | 1/6 |
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum Share {
+    /// Ingest: the point chunks decoded in one wave of reads.
+    IngestChunks,
+    /// Ingest: the per-cell counting grid.
+    CountingGrid,
+    /// Ingest: the scatter stage's record buffers.
+    ScatterBuffers,
+    /// Normals: the cache of decoded neighbour cells.
+    NormalsCellCache,
+    /// Normals: the cells estimated in one wave.
+    NormalsWave,
+    /// Reconstruct: the coarse global grid.
+    CoarseGrid,
+    /// Reconstruct: the cache of sorted store cells.
+    PointCache,
+    /// Reconstruct: the cache of leaf details.
+    DetailCache,
+}
+
+impl Share {
+    /// The slice as a divisor of the whole budget.
+    pub const fn divisor(self) -> u64 {
+        match self {
+            Share::IngestChunks => 2,
+            Share::CountingGrid => 4,
+            Share::ScatterBuffers => 8,
+            Share::NormalsCellCache => 4,
+            Share::NormalsWave => 3,
+            Share::CoarseGrid => 3,
+            Share::PointCache => 4,
+            Share::DetailCache => 6,
+        }
+    }
+
+    /// The slice of a budget of `total` bytes.
+    pub const fn of(self, total: u64) -> u64 {
+        total / self.divisor()
+    }
+}
 
 /// A memory budget in bytes.
 #[derive(Debug)]
@@ -31,6 +91,11 @@ impl Budget {
     /// The whole budget.
     pub fn total(&self) -> u64 {
         self.total
+    }
+
+    /// The bytes of slice `share` of this budget ([`Share`]).
+    pub fn share(&self, share: Share) -> u64 {
+        share.of(self.total)
     }
 
     /// Bytes admitted now.

@@ -5,6 +5,7 @@
 //! `--threads` workers; output order is fixed by sequence numbers, never by thread timing.
 
 pub mod budget;
+pub mod cache;
 pub mod progress;
 
 use crate::error::{Error, Result};

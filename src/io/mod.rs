@@ -6,6 +6,7 @@
 //! never to the file). Locations in errors are absolute: element index and byte offset (binary)
 //! or line (text), counted from the start of the file.
 
+pub mod atomic;
 pub mod conf;
 pub mod las;
 pub mod mesh_read;
