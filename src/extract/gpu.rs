@@ -84,10 +84,11 @@ use std::time::Instant;
 use rayon::prelude::*;
 use wgpu::util::DeviceExt;
 
-use super::cpu::{self, EdgeKey, GridGeom, McWorkspace, TileMesh};
-use super::field::Blend;
+use super::cpu::{self, McWorkspace};
+use super::field::BlendEval;
 use super::tables;
 use crate::error::{Error, Result};
+use crate::types::{Blend, EdgeKey, GridGeom, TileMesh};
 
 /// Whether marching cubes runs on a GPU (`--gpu`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -1792,7 +1793,7 @@ mod tests {
             .extract(values, dims, origin, iso, geom, &mut want)
             .unwrap();
         let mut got = TileMesh {
-            keys: vec![cpu::EdgeKey(7)],
+            keys: vec![EdgeKey(7)],
             ..TileMesh::default()
         };
         let gs = g

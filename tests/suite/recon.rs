@@ -312,7 +312,7 @@ fn killed_run_resumes_to_the_same_bytes() {
     }
 }
 
-fn to_mesh(t: &scanflow::extract::cpu::TileMesh) -> scanflow::io::mesh_read::Mesh {
+fn to_mesh(t: &scanflow::types::TileMesh) -> scanflow::io::mesh_read::Mesh {
     scanflow::io::mesh_read::Mesh {
         vertices: t.positions.clone(),
         triangles: t.triangles.clone(),
