@@ -1769,7 +1769,7 @@ pub fn reconstruct(
                             iso as f32,
                             &geom,
                             &mut mesh,
-                        );
+                        )?;
                         finish(*tt, mesh, cp)
                     })
                     .collect()
@@ -2135,7 +2135,7 @@ pub fn global_solve(
     cube: &Cube,
     depth: u32,
     sigma_vox: f64,
-) -> TileMesh {
+) -> Result<TileMesh> {
     let n = 1usize << depth;
     let pad = (n / 8).max(2);
     let h = cube.size / n as f64;
@@ -2161,8 +2161,8 @@ pub fn global_solve(
         n: n as u64,
     };
     let mut mesh = TileMesh::default();
-    marching_cubes(&block, [m; 3], [0; 3], iso as f32, &geom, &mut mesh);
-    mesh
+    marching_cubes(&block, [m; 3], [0; 3], iso as f32, &geom, &mut mesh)?;
+    Ok(mesh)
 }
 
 #[cfg(test)]
