@@ -66,8 +66,8 @@ impl Welder {
     ///
     /// `last_tile(key)` is the largest tile number that can contain `key` (the caller knows
     /// the tiling); keys with `last_tile(key) > t` are kept in the frontier, the others are
-    /// released after this tile. Calls `emit_vertex(global_index, tile_index, position)` once per new
-    /// vertex, in increasing index order, then `emit_triangle` for every triangle of the tile,
+    /// released after this tile. Calls `emit_vertex(global_index, tile_index, position)` once per
+    /// new vertex, in increasing index order, then `emit_triangle` for every triangle of the tile,
     /// with global indices; so a triangle only names vertices already emitted.
     ///
     /// Errors: those of the callbacks, and [`Error::Internal`] when `t` does not increase, the

@@ -59,8 +59,8 @@ pub struct Leaf<'a> {
     /// A name for the GPU's cache of leaf grids: the same id must mean the same detail for the
     /// life of a `GpuExtractor` (or until its `forget_leaves`).
     pub id: u64,
-    /// `dm³` values, x fastest, then one 0 if `dm³` is odd (`recon::pou::quantise_detail`): in units of
-    /// `unit·2^shift`.
+    /// `dm³` values, x fastest, then one 0 if `dm³` is odd (`recon::pou::quantise_detail`):
+    /// in units of `unit·2^shift`.
     pub detail: &'a [i16],
     /// The leaf's exponent (at most [`MAX_SHIFT`]).
     pub shift: u32,
@@ -85,8 +85,8 @@ pub struct Blend<'a> {
     pub e: i64,
     /// Detail overlap in fine voxels (`1 <= ov < e/2`).
     pub ov: i64,
-    /// Weight at detail offset `s`, `dm` entries, 0 at both ends (`recon::pou::pou_weights`; the GPU
-    /// skips the ends).
+    /// Weight at detail offset `s`, `dm` entries, 0 at both ends (`recon::pou::pou_weights`;
+    /// the GPU skips the ends).
     pub own: Vec<i32>,
     /// The fixed-point unit, a power of two (`recon::pou::unit_for`).
     pub unit: f32,

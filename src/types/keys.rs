@@ -100,8 +100,9 @@ pub fn demorton3(m: u64) -> [u32; 3] {
 /// `((i·(n + 1) + j)·(n + 1) + k)·3 + a` for a grid of `n` cells per axis.
 ///
 /// The packing is a bijection between the edges of the grid and an interval of `u64`s for
-/// `n ≤` [`super::GridGeom::MAX_N`]; keys of one grid compare in the order (i, j, k, axis). An edge
-/// is the same key for every tile holding it, which is what welds tiles (`extract::weld`).
+/// `n ≤` [`super::GridGeom::MAX_N`]; keys of one grid compare in the order (i, j, k, axis).
+/// An edge is the same key for every tile holding it, which is what welds tiles
+/// (`extract::weld`).
 #[derive(Copy, Clone, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub struct EdgeKey(pub u64);
 
