@@ -40,7 +40,7 @@
 //! blended on the host and uploaded as above.
 //!
 //! Whether it pays depends on the bytes: a leaf grid is `(1.5·E + 1)³` values of 16 bits
-//! ([`super::field::quantise_detail`]) for a cell of `E³` nodes of 32 bits, 1.7 times the
+//! ([`crate::types::Detail`]) for a cell of `E³` nodes of 32 bits, 1.7 times the
 //! cell's dense values, so it pays where leaves cover less than about 60% of a tile (a
 //! surface through a large tile) and where leaves are already resident
 //! (`benches/extract.rs` prints the bytes sent against the dense tile's); it also saves the
