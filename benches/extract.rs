@@ -27,8 +27,10 @@
 use std::time::Instant;
 
 use rayon::prelude::*;
-use scanflow::extract::field::{Axis, Blend, Detail, Leaf, quantise, quantise_detail, unit_for};
-use scanflow::extract::{GpuExtractor, GpuMode, GpuStats, GridGeom, McWorkspace, TileMesh};
+use scanflow::extract::field::BlendEval;
+use scanflow::extract::{GpuExtractor, GpuMode, GpuStats, McWorkspace};
+use scanflow::recon::pou::{quantise, quantise_detail, unit_for};
+use scanflow::types::{Axis, Blend, Detail, GridGeom, Leaf, TileMesh};
 
 /// A tile of `n + 1` nodes per axis: a sphere of radius `0.4·n` (few active cells) or a
 /// gyroid of period 16 cells (many).

@@ -15,107 +15,7 @@
 
 use super::tables::{self, CORNER_OFFSETS, EDGE_AXIS, EDGE_CORNERS};
 use crate::error::{Error, Result};
-
-/// Geometry of the global grid: node `(i, j, k)` sits at `origin + h·(i, j, k)`; `n` cells per
-/// axis, so node indices run over `0..=n`.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct GridGeom {
-    /// World position of node `(0, 0, 0)`, in input units.
-    pub origin: [f64; 3],
-    /// Edge length of a cell, in input units.
-    pub h: f64,
-    /// Cells per axis (at most [`GridGeom::MAX_N`]).
-    pub n: u64,
-}
-
-/// A grid edge: its lower node `(i, j, k)` and its axis `a` (0 = x, 1 = y, 2 = z), packed as
-/// `((i·(n + 1) + j)·(n + 1) + k)·3 + a` for a grid of `n` cells per axis.
-///
-/// The packing is a bijection between the edges of the grid and an interval of `u64`s for
-/// `n ≤` [`GridGeom::MAX_N`]; keys of one grid compare in the order (i, j, k, axis). An edge
-/// is the same key for every tile holding it, which is what welds tiles ([`super::weld`]).
-#[derive(Copy, Clone, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub struct EdgeKey(pub u64);
-
-impl GridGeom {
-    /// The largest `n`: `3·(n + 1)³` edge keys must fit a `u64`.
-    pub const MAX_N: u64 = 1 << 20;
-
-    /// A validated grid: `h` finite and positive, `origin` finite, `1 ≤ n ≤ MAX_N`.
-    pub fn new(origin: [f64; 3], h: f64, n: u64) -> Result<GridGeom> {
-        if !(h.is_finite() && h > 0.0) {
-            return Err(Error::Usage(format!(
-                "grid cell size is {h}, expected a finite positive number"
-            )));
-        }
-        if origin.iter().any(|v| !v.is_finite()) {
-            return Err(Error::Usage(format!(
-                "grid origin is {origin:?}, expected finite coordinates"
-            )));
-        }
-        if n == 0 || n > Self::MAX_N {
-            return Err(Error::Usage(format!(
-                "grid of {n} cells per axis, expected 1 to {}",
-                Self::MAX_N
-            )));
-        }
-        Ok(GridGeom { origin, h, n })
-    }
-
-    /// World position of node `node`.
-    #[inline]
-    pub fn node_position(&self, node: [u64; 3]) -> [f64; 3] {
-        [0, 1, 2].map(|d| self.origin[d] + self.h * node[d] as f64)
-    }
-
-    /// The key of the edge from node `node` along `axis` (see [`EdgeKey`]). `node` must be a
-    /// node of the grid (coordinates `≤ n`) and `axis < 3`.
-    #[inline]
-    pub fn edge_key(&self, node: [u64; 3], axis: u8) -> EdgeKey {
-        debug_assert!(node.iter().all(|&c| c <= self.n) && axis < 3);
-        let m = self.n + 1;
-        EdgeKey(((node[0] * m + node[1]) * m + node[2]) * 3 + axis as u64)
-    }
-
-    /// The lower node and axis of key `k`; the inverse of [`GridGeom::edge_key`].
-    #[inline]
-    pub fn decode_edge(&self, k: EdgeKey) -> ([u64; 3], u8) {
-        let m = self.n + 1;
-        let axis = (k.0 % 3) as u8;
-        let r = k.0 / 3;
-        let z = r % m;
-        let r = r / m;
-        ([r / m, r % m, z], axis)
-    }
-}
-
-/// One tile's mesh: vertex `i` lies on grid edge `keys[i]` at `positions[i]` (world
-/// coordinates, input units); triangles index into them, wound as in the
-/// [module docs](super).
-#[derive(Debug, Clone, Default, PartialEq)]
-pub struct TileMesh {
-    /// The grid edge of each vertex; no key appears twice.
-    pub keys: Vec<EdgeKey>,
-    /// World position of each vertex.
-    pub positions: Vec<[f64; 3]>,
-    /// Triangles, as indices into `keys` and `positions`.
-    pub triangles: Vec<[u32; 3]>,
-    /// Colour of each vertex (empty when the input points have none).
-    pub colors: Vec<[u8; 3]>,
-    /// Intensity of each vertex (empty when the input points have none).
-    pub intensity: Vec<f32>,
-}
-
-impl TileMesh {
-    /// Empty the mesh, keeping its buffers.
-    pub fn clear(&mut self) {
-        self.keys.clear();
-        self.positions.clear();
-        self.triangles.clear();
-        self.colors.clear();
-        self.intensity.clear();
-    }
-}
+use crate::types::{GridGeom, TileMesh};
 
 /// What one extraction did.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -126,15 +26,16 @@ pub struct McStats {
     pub active_cells: u64,
 }
 
-/// Reusable scratch of the marching-cubes kernel; see the [module docs](self).
+/// Reusable scratch of the marching-cubes kernel; see the [module docs](self). Keep one per
+/// worker and pass it every tile: its buffers grow to the largest tile and are reused.
 #[derive(Debug, Default)]
 pub struct McWorkspace {
     /// `v < iso` per node of two node layers (`z & 1` selects the layer).
     inside: Vec<u8>,
     /// Cases of one row of cells.
     row: Vec<u8>,
-    /// Vertex ids (or [`NONE`]) of the slab's edges, 5 arrays of `nx·ny`: x-edges of layer
-    /// parity 0 and 1, y-edges of layer parity 0 and 1, z-edges of the slab.
+    /// Vertex ids (or [`NONE`]) of the slab's edges, [`SLOT_ARRAYS`] arrays of `nx·ny`:
+    /// x-edges of layer parity 0 and 1, y-edges of layer parity 0 and 1, z-edges of the slab.
     slots: Vec<u32>,
     /// Slots set, per group: layer parity 0, layer parity 1 (x and y edges), z-edges.
     touched: [Vec<u32>; 3],
@@ -142,6 +43,57 @@ pub struct McWorkspace {
 
 /// An empty slot.
 const NONE: u32 = u32::MAX;
+
+/// Slot arrays of a slab, each one `u32` per node of a layer: x- and y-edges of both layer
+/// parities, and the z-edges between the layers.
+const SLOT_ARRAYS: usize = 5;
+
+/// Scratch bytes per node of a layer: two `inside` flags (two layers), a `u32` in each slot
+/// array, and at most as many `u32`s in the touched lists.
+const LAYER_NODE_BYTES: usize = 2 + 2 * SLOT_ARRAYS * std::mem::size_of::<u32>();
+
+/// The block being extracted, as [`McWorkspace::extract`] was given it.
+struct Block<'a> {
+    values: &'a [f32],
+    /// Nodes per axis.
+    dims: [usize; 3],
+    /// Global node of the block's node 0.
+    origin_node: [u64; 3],
+    iso: f32,
+    geom: &'a GridGeom,
+}
+
+/// Where each of a cell's 12 edges finds its slot, lower node and touched group, relative to
+/// the cell's base index `y·nx + x` in slab `k`.
+struct SlabEdges {
+    slot_off: [usize; 12],
+    node_off: [usize; 12],
+    group: [usize; 12],
+}
+
+impl SlabEdges {
+    /// The offsets of slab `k` of a block with layers of `l` nodes and rows of `nx`.
+    fn new(k: usize, nx: usize, l: usize) -> SlabEdges {
+        let mut s = SlabEdges {
+            slot_off: [0; 12],
+            node_off: [0; 12],
+            group: [0; 12],
+        };
+        for e in 0..12 {
+            let o = CORNER_OFFSETS[EDGE_CORNERS[e][0] as usize].map(|v| v as usize);
+            let par = (k + o[2]) & 1;
+            let (seg, g) = match EDGE_AXIS[e] {
+                0 => (par, par),
+                1 => (2 + par, par),
+                _ => (4, 2),
+            };
+            s.slot_off[e] = seg * l + o[1] * nx + o[0];
+            s.node_off[e] = o[2] * l + o[1] * nx + o[0];
+            s.group[e] = g;
+        }
+        s
+    }
+}
 
 impl McWorkspace {
     /// A workspace with no buffer yet.
@@ -153,8 +105,8 @@ impl McWorkspace {
     /// output [`TileMesh`] not included).
     pub fn scratch_bytes(dims: [usize; 3]) -> usize {
         let l = dims[0].saturating_mul(dims[1]);
-        // inside (2 layers) + row + slots (5 arrays of u32) + touched lists (at most as many).
-        l.saturating_mul(2 + 20 + 20).saturating_add(dims[0])
+        // Plus the row of cases.
+        l.saturating_mul(LAYER_NODE_BYTES).saturating_add(dims[0])
     }
 
     /// Extract the iso-surface of a block of nodes into `out` (cleared first).
@@ -179,31 +131,8 @@ impl McWorkspace {
         out: &mut TileMesh,
     ) -> Result<McStats> {
         out.clear();
+        check_block(values.len(), dims, origin_node, geom)?;
         let [nx, ny, nz] = dims;
-        let total = nx.checked_mul(ny).and_then(|v| v.checked_mul(nz));
-        if total != Some(values.len()) {
-            return Err(Error::Internal(format!(
-                "marching cubes: {} values for a block of {nx}×{ny}×{nz} nodes",
-                values.len()
-            )));
-        }
-        if geom.n > GridGeom::MAX_N {
-            return Err(Error::Internal(format!(
-                "marching cubes: grid of {} cells per axis, at most {} supported",
-                geom.n,
-                GridGeom::MAX_N
-            )));
-        }
-        for d in 0..3 {
-            let last = origin_node[d].checked_add(dims[d] as u64);
-            if dims[d] > 0 && last.is_none_or(|l| l - 1 > geom.n) {
-                return Err(Error::Internal(format!(
-                    "marching cubes: block of {dims:?} nodes at node {origin_node:?} leaves the \
-                     grid of {} cells per axis",
-                    geom.n
-                )));
-            }
-        }
         if nx < 2 || ny < 2 || nz < 2 {
             return Ok(McStats::default());
         }
@@ -213,121 +142,163 @@ impl McWorkspace {
             )));
         }
         let l = nx * ny;
+        self.reset(nx, l);
+        classify(&values[..l], iso, &mut self.inside[..l]);
+        let block = Block {
+            values,
+            dims,
+            origin_node,
+            iso,
+            geom,
+        };
+        let mut stats = McStats {
+            cells: ((nx - 1) * (ny - 1) * (nz - 1)) as u64,
+            active_cells: 0,
+        };
+        for k in 0..nz - 1 {
+            stats.active_cells += self.slab(&block, k, out);
+        }
+        Ok(stats)
+    }
+
+    /// Size the buffers for layers of `l` nodes in rows of `nx`, all slots empty.
+    fn reset(&mut self, nx: usize, l: usize) {
+        self.inside.clear();
+        self.inside.resize(2 * l, 0);
+        self.row.clear();
+        self.row.resize(nx - 1, 0);
+        self.slots.clear();
+        self.slots.resize(SLOT_ARRAYS * l, NONE);
+        for t in self.touched.iter_mut() {
+            t.clear();
+        }
+    }
+
+    /// The cells between node layers `k` and `k + 1` (layer `k` classified already): classify
+    /// layer `k + 1`, recycle the slots, and emit every active cell into `out`. Returns the
+    /// number of active cells.
+    fn slab(&mut self, b: &Block, k: usize, out: &mut TileMesh) -> u64 {
+        let [nx, ny, _] = b.dims;
+        let l = nx * ny;
         let McWorkspace {
             inside,
             row,
             slots,
             touched,
         } = self;
-        inside.clear();
-        inside.resize(2 * l, 0);
-        row.clear();
-        row.resize(nx - 1, 0);
-        slots.clear();
-        slots.resize(5 * l, NONE);
-        for t in touched.iter_mut() {
-            t.clear();
+        let p0 = k & 1;
+        let p1 = p0 ^ 1;
+        classify(
+            &b.values[(k + 1) * l..(k + 2) * l],
+            b.iso,
+            &mut inside[p1 * l..(p1 + 1) * l],
+        );
+        // Layer k + 1 takes the slots layer k - 1 had; z-edges are new.
+        for g in [p1, 2] {
+            for &s in &touched[g] {
+                slots[s as usize] = NONE;
+            }
+            touched[g].clear();
         }
-        classify(&values[..l], iso, &mut inside[..l]);
-
-        let iso64 = iso as f64;
-        let stride = [1, nx, l];
-        let mut stats = McStats {
-            cells: ((nx - 1) * (ny - 1) * (nz - 1)) as u64,
-            active_cells: 0,
-        };
-        for k in 0..nz - 1 {
-            let p0 = k & 1;
-            let p1 = p0 ^ 1;
-            classify(
-                &values[(k + 1) * l..(k + 2) * l],
-                iso,
-                &mut inside[p1 * l..(p1 + 1) * l],
+        let edges = SlabEdges::new(k, nx, l);
+        let (bot, top) = (&inside[p0 * l..(p0 + 1) * l], &inside[p1 * l..(p1 + 1) * l]);
+        let mut active = 0;
+        for y in 0..ny - 1 {
+            let r = y * nx;
+            row_cases(
+                [
+                    &bot[r..r + nx],
+                    &bot[r + nx..r + 2 * nx],
+                    &top[r..r + nx],
+                    &top[r + nx..r + 2 * nx],
+                ],
+                row,
             );
-            // Layer k + 1 takes the slots layer k - 1 had; z-edges are new.
-            for g in [p1, 2] {
-                for &s in &touched[g] {
-                    slots[s as usize] = NONE;
+            for (x, &case) in row.iter().enumerate() {
+                if case.wrapping_add(1) <= 1 {
+                    continue;
                 }
-                touched[g].clear();
-            }
-            // Per edge of a cell: slot offset, node offset and touched group, from the cell's
-            // base index y·nx + x.
-            let mut slot_off = [0usize; 12];
-            let mut node_off = [0usize; 12];
-            let mut group = [0usize; 12];
-            for e in 0..12 {
-                let o = CORNER_OFFSETS[EDGE_CORNERS[e][0] as usize].map(|v| v as usize);
-                let par = (k + o[2]) & 1;
-                let (seg, g) = match EDGE_AXIS[e] {
-                    0 => (par, par),
-                    1 => (2 + par, par),
-                    _ => (4, 2),
-                };
-                slot_off[e] = seg * l + o[1] * nx + o[0];
-                node_off[e] = o[2] * l + o[1] * nx + o[0];
-                group[e] = g;
-            }
-            let (bot, top) = (&inside[p0 * l..(p0 + 1) * l], &inside[p1 * l..(p1 + 1) * l]);
-            for y in 0..ny - 1 {
-                let r = y * nx;
-                row_cases(
-                    [
-                        &bot[r..r + nx],
-                        &bot[r + nx..r + 2 * nx],
-                        &top[r..r + nx],
-                        &top[r + nx..r + 2 * nx],
-                    ],
-                    row,
-                );
-                for (x, &case) in row.iter().enumerate() {
-                    if case.wrapping_add(1) <= 1 {
-                        continue;
+                active += 1;
+                let mut ids = [0u32; 12];
+                for &e in tables::case_edges(case) {
+                    let e = e as usize;
+                    let s = r + x + edges.slot_off[e];
+                    if slots[s] == NONE {
+                        slots[s] = out.keys.len() as u32;
+                        touched[edges.group[e]].push(s as u32);
+                        push_vertex(b, &edges, [x, y, k], e, out);
                     }
-                    stats.active_cells += 1;
-                    let base = r + x;
-                    let mut ids = [0u32; 12];
-                    for &e in tables::case_edges(case) {
-                        let e = e as usize;
-                        let s = base + slot_off[e];
-                        let mut id = slots[s];
-                        if id == NONE {
-                            id = out.keys.len() as u32;
-                            slots[s] = id;
-                            touched[group[e]].push(s as u32);
-                            let axis = EDGE_AXIS[e] as usize;
-                            let a = k * l + base + node_off[e];
-                            let o = CORNER_OFFSETS[EDGE_CORNERS[e][0] as usize];
-                            let g = [
-                                origin_node[0] + (x + o[0] as usize) as u64,
-                                origin_node[1] + (y + o[1] as usize) as u64,
-                                origin_node[2] + (k + o[2] as usize) as u64,
-                            ];
-                            let p = edge_vertex(
-                                geom,
-                                g,
-                                axis,
-                                values[a],
-                                values[a + stride[axis]],
-                                iso64,
-                            );
-                            out.keys.push(geom.edge_key(g, axis as u8));
-                            out.positions.push(p);
-                        }
-                        ids[e] = id;
-                    }
-                    for t in tables::case_triangles(case) {
-                        out.triangles.push([
-                            ids[t[0] as usize],
-                            ids[t[1] as usize],
-                            ids[t[2] as usize],
-                        ]);
-                    }
+                    ids[e] = slots[s];
+                }
+                for t in tables::case_triangles(case) {
+                    out.triangles.push([
+                        ids[t[0] as usize],
+                        ids[t[1] as usize],
+                        ids[t[2] as usize],
+                    ]);
                 }
             }
         }
-        Ok(stats)
+        active
     }
+}
+
+/// Check that a block of `dims` nodes holds `len` values and, placed at global node
+/// `origin_node`, lies in the grid `geom`.
+fn check_block(len: usize, dims: [usize; 3], origin_node: [u64; 3], geom: &GridGeom) -> Result<()> {
+    let [nx, ny, nz] = dims;
+    let total = nx.checked_mul(ny).and_then(|v| v.checked_mul(nz));
+    if total != Some(len) {
+        return Err(Error::Internal(format!(
+            "marching cubes: {len} values for a block of {nx}×{ny}×{nz} nodes"
+        )));
+    }
+    if geom.n > GridGeom::MAX_N {
+        return Err(Error::Internal(format!(
+            "marching cubes: grid of {} cells per axis, at most {} supported",
+            geom.n,
+            GridGeom::MAX_N
+        )));
+    }
+    for d in 0..3 {
+        let last = origin_node[d].checked_add(dims[d] as u64);
+        if dims[d] > 0 && last.is_none_or(|l| l - 1 > geom.n) {
+            return Err(Error::Internal(format!(
+                "marching cubes: block of {dims:?} nodes at node {origin_node:?} leaves the \
+                 grid of {} cells per axis",
+                geom.n
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// Append the vertex of edge `e` of cell `cell` (block coordinates; `cell[2]` is the slab) to
+/// `out`: its key and its position.
+#[inline]
+fn push_vertex(b: &Block, edges: &SlabEdges, cell: [usize; 3], e: usize, out: &mut TileMesh) {
+    let [x, y, k] = cell;
+    let [nx, ny, _] = b.dims;
+    let l = nx * ny;
+    let axis = EDGE_AXIS[e] as usize;
+    let a = k * l + y * nx + x + edges.node_off[e];
+    let stride = [1, nx, l];
+    let o = CORNER_OFFSETS[EDGE_CORNERS[e][0] as usize];
+    let g = [
+        b.origin_node[0] + (x + o[0] as usize) as u64,
+        b.origin_node[1] + (y + o[1] as usize) as u64,
+        b.origin_node[2] + (k + o[2] as usize) as u64,
+    ];
+    let p = edge_vertex(
+        b.geom,
+        g,
+        axis,
+        b.values[a],
+        b.values[a + stride[axis]],
+        b.iso as f64,
+    );
+    out.keys.push(b.geom.edge_key(g, axis as u8));
+    out.positions.push(p);
 }
 
 /// World position of the vertex on the grid edge from global node `node` along `axis`, whose
@@ -382,13 +353,9 @@ fn row_cases(rows: [&[u8]; 4], out: &mut [u8]) {
 
 /// Extract the iso-surface of node values `values` (x fastest:
 /// `values[(z·dims[1] + y)·dims[0] + x]`) of a block of `dims[0]×dims[1]×dims[2]` nodes whose
-/// first node is global node `origin_node`, into `out` (cleared first). See
-/// [`McWorkspace::extract`], which this calls with a fresh workspace.
-///
-/// # Panics
-///
-/// When `values` does not hold `dims` nodes or the block does not fit the grid: a caller bug.
-/// [`McWorkspace::extract`] returns these as errors instead, and reuses its buffers.
+/// first node is global node `origin_node`, into `out` (cleared first), with a fresh
+/// workspace: a convenience for one-off blocks. A tile loop keeps one [`McWorkspace`] per
+/// worker and calls [`McWorkspace::extract`], which this calls and whose errors it returns.
 pub fn marching_cubes(
     values: &[f32],
     dims: [usize; 3],
@@ -396,15 +363,14 @@ pub fn marching_cubes(
     iso: f32,
     geom: &GridGeom,
     out: &mut TileMesh,
-) {
-    if let Err(e) = McWorkspace::new().extract(values, dims, origin_node, iso, geom, out) {
-        panic!("{e}");
-    }
+) -> Result<McStats> {
+    McWorkspace::new().extract(values, dims, origin_node, iso, geom, out)
 }
 
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
+    use crate::types::EdgeKey;
     use rand::{Rng, SeedableRng};
     use std::collections::{BTreeMap, HashMap};
 
@@ -522,24 +488,6 @@ pub(crate) mod tests {
             });
             assert_eq!(*p, want);
         }
-    }
-
-    #[test]
-    fn edge_keys_round_trip() {
-        let mut rng = rand_pcg::Pcg64::seed_from_u64(7);
-        for n in [1u64, 2, 17, 1000, GridGeom::MAX_N] {
-            let g = GridGeom::new([0.0; 3], 1.0, n).unwrap();
-            for _ in 0..200 {
-                let node = [0; 3].map(|_: u64| rng.random_range(0..=n));
-                let axis = rng.random_range(0..3u8);
-                assert_eq!(g.decode_edge(g.edge_key(node, axis)), (node, axis));
-            }
-            let top = g.edge_key([n; 3], 2);
-            assert_eq!(top.0, 3 * (n + 1).pow(3) - 1);
-        }
-        assert!(GridGeom::new([0.0; 3], 0.0, 4).is_err());
-        assert!(GridGeom::new([0.0; 3], 1.0, GridGeom::MAX_N + 1).is_err());
-        assert!(GridGeom::new([f64::NAN, 0.0, 0.0], 1.0, 4).is_err());
     }
 
     /// A naive marching cubes: every cell on its own, vertices named by key: the oracle of the

@@ -40,7 +40,7 @@
 //! blended on the host and uploaded as above.
 //!
 //! Whether it pays depends on the bytes: a leaf grid is `(1.5·E + 1)³` values of 16 bits
-//! ([`super::field::quantise_detail`]) for a cell of `E³` nodes of 32 bits, 1.7 times the
+//! ([`crate::types::Detail`]) for a cell of `E³` nodes of 32 bits, 1.7 times the
 //! cell's dense values, so it pays where leaves cover less than about 60% of a tile (a
 //! surface through a large tile) and where leaves are already resident
 //! (`benches/extract.rs` prints the bytes sent against the dense tile's); it also saves the
@@ -84,10 +84,11 @@ use std::time::Instant;
 use rayon::prelude::*;
 use wgpu::util::DeviceExt;
 
-use super::cpu::{self, EdgeKey, GridGeom, McWorkspace, TileMesh};
-use super::field::Blend;
+use super::cpu::{self, McWorkspace};
+use super::field::BlendEval;
 use super::tables;
 use crate::error::{Error, Result};
+use crate::types::{Blend, EdgeKey, GridGeom, TileMesh};
 
 /// Whether marching cubes runs on a GPU (`--gpu`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -1792,7 +1793,7 @@ mod tests {
             .extract(values, dims, origin, iso, geom, &mut want)
             .unwrap();
         let mut got = TileMesh {
-            keys: vec![cpu::EdgeKey(7)],
+            keys: vec![EdgeKey(7)],
             ..TileMesh::default()
         };
         let gs = g

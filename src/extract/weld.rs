@@ -1,4 +1,4 @@
-//! Welding tile meshes into one indexed mesh, streaming (DESIGN.md step 5).
+//! Welding tile meshes into one indexed mesh, streaming (ARCHITECTURE.md step 5).
 //!
 //! A vertex is named by the grid edge it lies on ([`EdgeKey`]), and two tiles that hold the
 //! same edge compute the same vertex ([module docs](super), "Seams"). The [`Welder`] takes
@@ -11,8 +11,8 @@
 use std::collections::{BTreeMap, HashMap};
 use std::hash::{BuildHasherDefault, Hasher};
 
-use super::cpu::{EdgeKey, TileMesh};
 use crate::error::{Error, Result};
+use crate::types::{EdgeKey, TileMesh};
 
 /// A hasher for [`EdgeKey`]s: the splitmix64 finaliser of the key, cheap and well mixed in
 /// every bit (keys of a seam share their low bits when the grid size is a power of two).
@@ -66,8 +66,8 @@ impl Welder {
     ///
     /// `last_tile(key)` is the largest tile number that can contain `key` (the caller knows
     /// the tiling); keys with `last_tile(key) > t` are kept in the frontier, the others are
-    /// released after this tile. Calls `emit_vertex(global_index, tile_index, position)` once per new
-    /// vertex, in increasing index order, then `emit_triangle` for every triangle of the tile,
+    /// released after this tile. Calls `emit_vertex(global_index, tile_index, position)` once per
+    /// new vertex, in increasing index order, then `emit_triangle` for every triangle of the tile,
     /// with global indices; so a triangle only names vertices already emitted.
     ///
     /// Errors: those of the callbacks, and [`Error::Internal`] when `t` does not increase, the
@@ -160,9 +160,10 @@ impl Welder {
 
 #[cfg(test)]
 mod tests {
+    use super::super::cpu::McWorkspace;
     use super::super::cpu::tests::{canonical, check_closed_oriented, key_triangles};
-    use super::super::cpu::{GridGeom, McWorkspace};
     use super::*;
+    use crate::types::GridGeom;
 
     /// A sphere-ish blob field over `nodes` nodes: a long capsule along x, so every tile of a
     /// row holds part of the surface.

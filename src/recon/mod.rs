@@ -45,15 +45,15 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, IoContext, Result};
 use crate::exec::Ctx;
-use crate::extract::cpu::{GridGeom, TileMesh, marching_cubes};
-use crate::extract::field::{
-    Axis, Blend, Detail, Leaf, MAX_SHIFT, quantise, quantise_detail, unit_for,
-};
+use crate::extract::cpu::marching_cubes;
+use crate::extract::field::BlendEval;
 use crate::extract::weld::Welder;
 use crate::io::mesh_write::MeshPlyWriter;
 use crate::store::Store;
 use crate::types::{Aabb, CellKey, Cube, PointBatch, morton3};
+use crate::types::{Axis, Blend, Detail, GridGeom, Leaf, MAX_SHIFT, TileMesh};
 use fft_solve::{LocalGrid, Solver};
+use pou::{quantise, quantise_detail, unit_for};
 
 /// Peak bytes per node of a solve: the splatted normals (12) and the divergence (4).
 const COARSE_BYTES_PER_NODE: u64 = 16;
@@ -1274,7 +1274,7 @@ fn read_tile(path: &Path) -> Result<TileMesh> {
     let mut m = TileMesh::default();
     let mut o = 40;
     for _ in 0..nv {
-        m.keys.push(crate::extract::cpu::EdgeKey(u64_at(o)));
+        m.keys.push(crate::types::EdgeKey(u64_at(o)));
         o += 8;
     }
     for _ in 0..nv {
@@ -1568,7 +1568,7 @@ pub fn reconstruct(
     let stage = ctx.progress.stage("tiles", Some(tiles_total), "tiles");
     let mut tiles_done = 0usize;
     let mut t = 0u64;
-    let last_tile = |key: crate::extract::cpu::EdgeKey| -> u64 {
+    let last_tile = |key: crate::types::EdgeKey| -> u64 {
         let (node, _axis) = geom.decode_edge(key);
         let c = node.map(|v| (v / plan.tile).min(ntiles_axis - 1) as u32);
         morton3(c)
@@ -1769,7 +1769,7 @@ pub fn reconstruct(
                             iso as f32,
                             &geom,
                             &mut mesh,
-                        );
+                        )?;
                         finish(*tt, mesh, cp)
                     })
                     .collect()
@@ -2135,7 +2135,7 @@ pub fn global_solve(
     cube: &Cube,
     depth: u32,
     sigma_vox: f64,
-) -> TileMesh {
+) -> Result<TileMesh> {
     let n = 1usize << depth;
     let pad = (n / 8).max(2);
     let h = cube.size / n as f64;
@@ -2161,8 +2161,8 @@ pub fn global_solve(
         n: n as u64,
     };
     let mut mesh = TileMesh::default();
-    marching_cubes(&block, [m; 3], [0; 3], iso as f32, &geom, &mut mesh);
-    mesh
+    marching_cubes(&block, [m; 3], [0; 3], iso as f32, &geom, &mut mesh)?;
+    Ok(mesh)
 }
 
 #[cfg(test)]

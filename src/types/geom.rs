@@ -1,0 +1,232 @@
+//! Boxes, the octree's root cube and rigid transforms, in world coordinates (`f64`, input
+//! units).
+
+use serde::{Deserialize, Serialize};
+
+use super::CellKey;
+
+/// An axis-aligned bounding box in world coordinates.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Aabb {
+    /// Lower corner.
+    pub min: [f64; 3],
+    /// Upper corner.
+    pub max: [f64; 3],
+}
+
+impl Aabb {
+    /// The empty box: `min = +inf`, `max = -inf`, the identity of [`Aabb::union`].
+    pub const EMPTY: Aabb = Aabb {
+        min: [f64::INFINITY; 3],
+        max: [f64::NEG_INFINITY; 3],
+    };
+
+    /// True when no point was added.
+    pub fn is_empty(&self) -> bool {
+        (0..3).any(|i| self.min[i] > self.max[i])
+    }
+
+    /// Grow to contain `p`.
+    #[inline]
+    pub fn add(&mut self, p: [f64; 3]) {
+        for i in 0..3 {
+            self.min[i] = self.min[i].min(p[i]);
+            self.max[i] = self.max[i].max(p[i]);
+        }
+    }
+
+    /// The smallest box holding both.
+    pub fn union(&self, o: &Aabb) -> Aabb {
+        let mut r = *self;
+        for i in 0..3 {
+            r.min[i] = r.min[i].min(o.min[i]);
+            r.max[i] = r.max[i].max(o.max[i]);
+        }
+        r
+    }
+
+    /// The box enlarged by `h` on every side.
+    pub fn grown(&self, h: f64) -> Aabb {
+        Aabb {
+            min: self.min.map(|v| v - h),
+            max: self.max.map(|v| v + h),
+        }
+    }
+
+    /// True when `p` lies in the box (faces included).
+    #[inline]
+    pub fn contains(&self, p: [f64; 3]) -> bool {
+        (0..3).all(|i| p[i] >= self.min[i] && p[i] <= self.max[i])
+    }
+
+    /// True when the two boxes share a point.
+    pub fn meets(&self, o: &Aabb) -> bool {
+        (0..3).all(|i| self.min[i] <= o.max[i] && o.min[i] <= self.max[i])
+    }
+
+    /// Edge lengths.
+    pub fn extent(&self) -> [f64; 3] {
+        [
+            self.max[0] - self.min[0],
+            self.max[1] - self.min[1],
+            self.max[2] - self.min[2],
+        ]
+    }
+
+    /// Length of the diagonal.
+    pub fn diagonal(&self) -> f64 {
+        let e = self.extent();
+        (e[0] * e[0] + e[1] * e[1] + e[2] * e[2]).sqrt()
+    }
+}
+
+/// A cube: the root of the octree.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Cube {
+    /// Lower corner.
+    pub origin: [f64; 3],
+    /// Edge length.
+    pub size: f64,
+}
+
+impl Cube {
+    /// The cube centred on `b`, with edge the largest extent of `b` enlarged by `1 + margin`.
+    /// A box of zero extent gets edge 1 so that cells have a size.
+    pub fn around(b: &Aabb, margin: f64) -> Cube {
+        let e = b.extent();
+        let mut size = e[0].max(e[1]).max(e[2]) * (1.0 + margin);
+        if size.is_nan() || size <= 0.0 || !size.is_finite() {
+            size = 1.0;
+        }
+        let mut origin = [0.0; 3];
+        for i in 0..3 {
+            origin[i] = 0.5 * (b.min[i] + b.max[i]) - 0.5 * size;
+        }
+        Cube { origin, size }
+    }
+
+    /// The box of cell `key`.
+    pub fn cell_box(&self, key: CellKey) -> Aabb {
+        let (l, [x, y, z]) = key.decode();
+        let s = self.size / (1u64 << l) as f64;
+        let min = [
+            self.origin[0] + x as f64 * s,
+            self.origin[1] + y as f64 * s,
+            self.origin[2] + z as f64 * s,
+        ];
+        Aabb {
+            min,
+            max: [min[0] + s, min[1] + s, min[2] + s],
+        }
+    }
+
+    /// Integer coordinates of the level-`level` cell holding `p`, clamped into the cube.
+    #[inline]
+    pub fn cell_coords(&self, p: [f64; 3], level: u32) -> [u32; 3] {
+        let n = (1u64 << level) as f64;
+        let inv = n / self.size;
+        let max = (1u64 << level) - 1;
+        let mut c = [0u32; 3];
+        for i in 0..3 {
+            let v = ((p[i] - self.origin[i]) * inv).floor();
+            c[i] = if v <= 0.0 {
+                0
+            } else {
+                (v as u64).min(max) as u32
+            };
+        }
+        c
+    }
+}
+
+/// A rigid transform `p -> R p + t`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Rigid {
+    /// Row-major rotation matrix.
+    pub rotation: [[f64; 3]; 3],
+    /// Translation.
+    pub translation: [f64; 3],
+}
+
+impl Rigid {
+    /// The identity.
+    pub const IDENTITY: Rigid = Rigid {
+        rotation: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+        translation: [0.0; 3],
+    };
+
+    /// From a translation and a unit quaternion `(x, y, z, w)` (normalised here).
+    pub fn from_quaternion(t: [f64; 3], q: [f64; 4]) -> Rigid {
+        let uq = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+            q[3], q[0], q[1], q[2],
+        ));
+        let m = uq.to_rotation_matrix();
+        let mut rotation = [[0.0; 3]; 3];
+        for (r, row) in rotation.iter_mut().enumerate() {
+            for (c, v) in row.iter_mut().enumerate() {
+                *v = m[(r, c)];
+            }
+        }
+        Rigid {
+            rotation,
+            translation: t,
+        }
+    }
+
+    /// Rotate a vector.
+    #[inline]
+    pub fn rotate(&self, p: [f64; 3]) -> [f64; 3] {
+        let r = &self.rotation;
+        [
+            r[0][0] * p[0] + r[0][1] * p[1] + r[0][2] * p[2],
+            r[1][0] * p[0] + r[1][1] * p[1] + r[1][2] * p[2],
+            r[2][0] * p[0] + r[2][1] * p[1] + r[2][2] * p[2],
+        ]
+    }
+
+    /// Transform a point.
+    #[inline]
+    pub fn apply(&self, p: [f64; 3]) -> [f64; 3] {
+        let r = self.rotate(p);
+        [
+            r[0] + self.translation[0],
+            r[1] + self.translation[1],
+            r[2] + self.translation[2],
+        ]
+    }
+
+    /// True for the identity (exactly).
+    pub fn is_identity(&self) -> bool {
+        *self == Rigid::IDENTITY
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cube_cells() {
+        let b = Aabb {
+            min: [0.0, 0.0, 0.0],
+            max: [2.0, 1.0, 1.0],
+        };
+        let c = Cube::around(&b, 0.0);
+        assert_eq!(c.size, 2.0);
+        assert_eq!(c.cell_coords([1.99, 0.2, 0.2], 1), [1, 0, 0]);
+        assert_eq!(c.cell_coords([2.0, 1.5, -0.5], 1), [1, 1, 0]);
+        let bx = c.cell_box(CellKey::new(1, [1, 0, 0]));
+        assert_eq!(bx.min, [1.0, -0.5, -0.5]);
+    }
+
+    #[test]
+    fn quaternion_identity_and_turn() {
+        let t = Rigid::from_quaternion([0.0; 3], [0.0, 0.0, 0.0, 1.0]);
+        assert!((t.apply([1.0, 2.0, 3.0])[2] - 3.0).abs() < 1e-12);
+        let s = std::f64::consts::FRAC_1_SQRT_2;
+        // 90 degrees about z maps x to y.
+        let t = Rigid::from_quaternion([1.0, 0.0, 0.0], [0.0, 0.0, s, s]);
+        let p = t.apply([1.0, 0.0, 0.0]);
+        assert!((p[0] - 1.0).abs() < 1e-12 && (p[1] - 1.0).abs() < 1e-12);
+    }
+}
