@@ -18,7 +18,7 @@ use super::{MAX_K_FACTOR, NormalParams, ORIENT_K, TARGET_ANGLE};
 use crate::types::Aabb;
 
 /// Points of a cell sampled to measure its noise ([`cell_k`]).
-const NOISE_SAMPLE: usize = 1024;
+pub const NOISE_SAMPLE: usize = 1024;
 
 /// Slack on a k-th neighbour distance, so that a neighbour at exactly that distance from the
 /// box still counts as possibly outside it despite rounding.

@@ -10,9 +10,9 @@ use crate::store::input::Inputs;
 use crate::types::{Aabb, Cube, PointBatch};
 
 /// The sample reads about one chunk in this many...
-const SAMPLE_ONE_IN: usize = 64;
+pub const SAMPLE_ONE_IN: usize = 64;
 /// ...and at least this many chunks (fewer only when the inputs have fewer).
-const SAMPLE_MIN_CHUNKS: usize = 8;
+pub const SAMPLE_MIN_CHUNKS: usize = 8;
 
 /// The provisional bounds: the headers' where every input has them (LAS, no read at all),
 /// else the bounds of a deterministic sample of about one chunk in [`SAMPLE_ONE_IN`] (every

@@ -34,7 +34,7 @@ pub fn grid_bytes(cells: u64) -> u64 {
 }
 
 /// The most levels a counting grid may have for its (single) copy to fit `slice` bytes, the
-/// budget's [`crate::exec::Share::CountingGrid`]; at least 1.
+/// budget's [`crate::exec::budget::Share::CountingGrid`]; at least 1.
 pub fn max_levels(slice: u64) -> u32 {
     let mut l = MAX_GRID_LEVELS;
     while l > 1 && grid_copy_bytes(1u64 << (3 * l)) > slice {
