@@ -24,6 +24,7 @@ pub mod extract;
 pub mod io;
 pub mod metrics;
 pub mod normals;
+pub mod pipeline;
 pub mod recon;
 pub mod store;
 pub mod synth;

@@ -10,7 +10,8 @@ use clap::{Args, Parser, Subcommand};
 use scanflow::exec::progress::{Mode, Progress};
 use scanflow::exec::{Ctx, default_mem_bytes, human_bytes, parse_mem, peak_rss_bytes};
 use scanflow::io::InputSpec;
-use scanflow::store::{IngestParams, Store};
+use scanflow::pipeline::ingest::{IngestParams, StoreSource};
+use scanflow::store::Store;
 
 /// Out-of-core streaming surface reconstruction for huge 3D scans.
 #[derive(Parser, Debug)]
@@ -317,7 +318,7 @@ fn run(cli: Cli) -> Result<()> {
                 normal_params: normal.params(),
                 ..Default::default()
             };
-            let st = scanflow::store::ingest(&specs, &output, &params, &ctx)?;
+            let st = scanflow::pipeline::ingest::ingest(&specs, &output, &params, &ctx)?;
             if let Some((n, secs)) = &st.normals {
                 outln!(
                     "estimated normals for {} points in {:.2} s ({:.2} M points/s; k = {}..{}, {} by viewpoint, {} by propagation, {} degenerate, {} components)",
@@ -539,38 +540,25 @@ fn reconstruct(
     let resume = params.resume;
     // One directory argument is a store; anything else is ingested into the work dir.
     let mode = normal.mode()?;
-    let store_dir = if conf.is_none() && inputs.len() == 1 && inputs[0].is_dir() {
+    let source = if conf.is_none() && inputs.len() == 1 && inputs[0].is_dir() {
         if mode != scanflow::normals::NormalsMode::Auto || !normal.viewpoint.is_empty() {
             log::warn!(
                 "{}: a store keeps the normals it was ingested with; --normals and --viewpoint apply to `ingest`",
                 inputs[0].display()
             );
         }
-        inputs[0].clone()
+        StoreSource::Store(inputs[0].clone())
     } else {
-        let specs = input_specs(inputs, conf, &normal.viewpoint)?;
-        let dir = work.join("store");
-        if !(resume && dir.join("manifest.json").exists()) {
-            if dir.exists() && !resume {
-                anyhow::bail!(
-                    "{}: work directory holds another run's files; pass --resume to continue that run, or choose another --work-dir",
-                    work.display()
-                );
-            }
-            std::fs::create_dir_all(&work)
-                .with_context(|| format!("{}: cannot create the work directory", work.display()))?;
-            // Small cells: leaves read the store cells around them through a small cache.
-            let ingest = IngestParams {
-                max_cell_points: 1 << 18,
-                normals: mode,
-                normal_params: normal.params(),
-                ..Default::default()
-            };
-            scanflow::store::ingest(&specs, &dir, &ingest, ctx)?;
-        }
-        dir
+        StoreSource::Points(input_specs(inputs, conf, &normal.viewpoint)?)
     };
-    let store = Store::open(&store_dir)?;
+    let store = scanflow::pipeline::ingest::open_or_ingest(
+        &source,
+        &work,
+        resume,
+        mode,
+        normal.params(),
+        ctx,
+    )?;
     let st = scanflow::recon::reconstruct(&store, output, &params, ctx)?;
     if !keep_work {
         std::fs::remove_dir_all(&work)

@@ -8,8 +8,175 @@
 //! `robust` re-fits once with Cauchy weights `w = 1 / (1 + (r/s)²)` of each neighbour's
 //! distance `r` to the first plane, `s` being 1.4826 × the median of those distances: outliers
 //! and points of a second sheet within the neighbourhood then pull the plane far less.
+//!
+//! A store cell is fitted in two steps ([`fit_own`], then [`fit_boundary`] once its halo is
+//! known), as the [module docs](super) describe.
 
 use nalgebra::{Matrix3, Vector3};
+
+use super::{MAX_K_FACTOR, NormalParams, ORIENT_K, TARGET_ANGLE};
+use crate::types::Aabb;
+
+/// Points of a cell sampled to measure its noise ([`cell_k`]).
+pub const NOISE_SAMPLE: usize = 1024;
+
+/// Slack on a k-th neighbour distance, so that a neighbour at exactly that distance from the
+/// box still counts as possibly outside it despite rounding.
+const DK_SLACK: f64 = 1e-6;
+
+/// `p` relative to `c`, in f32 (a cell's points about its centre lose no digits that matter).
+#[inline]
+pub fn rel(p: [f64; 3], c: [f64; 3]) -> [f32; 3] {
+    [
+        (p[0] - c[0]) as f32,
+        (p[1] - c[1]) as f32,
+        (p[2] - c[2]) as f32,
+    ]
+}
+
+/// Points of other cells near a cell's box, relative to the cell's centre.
+#[derive(Debug, Default)]
+pub struct Halo {
+    /// Positions relative to the cell's centre.
+    pub pos: Vec<[f32; 3]>,
+    /// `(cell, index in that cell)` of each.
+    pub origin: Vec<(u32, u32)>,
+}
+
+/// A cell after fitting with its own points only.
+#[derive(Debug)]
+pub struct OwnFit {
+    /// Neighbours per fit in this cell.
+    pub k: usize,
+    /// Typical k-th neighbour distance in the cell.
+    pub typical: f32,
+    /// Centre of the cell's box, the origin of `rel`.
+    pub centre: [f64; 3],
+    /// The cell's points relative to `centre`.
+    pub rel: Vec<[f32; 3]>,
+    /// Normal of each point, `None` until fitted or where no plane fits.
+    pub normals: Vec<Option<[f32; 3]>>,
+    /// [`ORIENT_K`] nearest own neighbours of each point (`u32::MAX` for none).
+    pub nbrs: Vec<u32>,
+    /// Points whose neighbour ball leaves the box (fit again with the halo).
+    pub boundary: Vec<u32>,
+    /// The halo's reach: how far beyond the box a boundary point's ball goes, at most one
+    /// cell edge.
+    pub h: f64,
+}
+
+/// The cell's neighbourhood size: `k`, grown where noise dominates the fits (measured on a
+/// sample of up to [`NOISE_SAMPLE`] of its points; see [`TARGET_ANGLE`]).
+pub fn cell_k(rel: &[[f32; 3]], k: usize) -> usize {
+    let n = rel.len();
+    if n <= k {
+        return k;
+    }
+    let sample: Vec<u32> = (0..n as u32).step_by((n / NOISE_SAMPLE).max(1)).collect();
+    let mut spreads = Vec::with_capacity(sample.len());
+    knn_all(rel, &sample, k, None, |_, nb| {
+        if let Some(s) = spread(rel, nb) {
+            spreads.push(s);
+        }
+    });
+    if spreads.is_empty() {
+        return k;
+    }
+    spreads.sort_by(|a, b| a.total_cmp(b));
+    let err = spreads[spreads.len() / 2] / (k as f64).sqrt();
+    let grown = (k as f64 * err / TARGET_ANGLE).ceil() as usize;
+    grown.clamp(k, MAX_K_FACTOR * k)
+}
+
+/// Fit the points `pos` of a cell with box `bx` among themselves. A point whose k-th
+/// neighbour distance `d_k` exceeds its distance `b` to the box faces may have neighbours in
+/// other cells: it is left for [`fit_boundary`], and the halo must reach `d_k − b` past the box.
+pub fn fit_own(pos: &[[f64; 3]], bx: &Aabb, params: &NormalParams) -> OwnFit {
+    let centre = [0, 1, 2].map(|a| 0.5 * (bx.min[a] + bx.max[a]));
+    let edge = bx.max[0] - bx.min[0];
+    let n = pos.len();
+    let rel: Vec<[f32; 3]> = pos.iter().map(|p| rel(*p, centre)).collect();
+    let params = &NormalParams {
+        k: if params.adaptive {
+            cell_k(&rel, params.k)
+        } else {
+            params.k
+        },
+        ..*params
+    };
+    let mut normals = vec![None; n];
+    let mut nbrs = vec![u32::MAX; n * ORIENT_K];
+    let mut boundary = Vec::new();
+    let mut h = 0f64;
+    let all: Vec<u32> = (0..n as u32).collect();
+    let typical = knn_all(&rel, &all, params.k, None, |i, nb| {
+        let i = i as usize;
+        let p = pos[i];
+        let b = (0..3)
+            .map(|a| (p[a] - bx.min[a]).min(bx.max[a] - p[a]))
+            .fold(f64::INFINITY, f64::min);
+        let dk = if nb.len() < params.k {
+            f64::INFINITY
+        } else {
+            (nb[nb.len() - 1].0 as f64).sqrt() * (1.0 + DK_SLACK)
+        };
+        if dk > b {
+            boundary.push(i as u32);
+            h = h.max(dk - b);
+            return;
+        }
+        normals[i] = fit_normal(&rel, nb, params.robust);
+        keep_nbrs(&mut nbrs[i * ORIENT_K..(i + 1) * ORIENT_K], i as u32, nb, n);
+    });
+    OwnFit {
+        k: params.k,
+        typical,
+        centre,
+        rel,
+        normals,
+        nbrs,
+        boundary,
+        h: h.min(edge),
+    }
+}
+
+/// Fit the boundary points of `f` again among the cell's points and its `halo`. Returns, for
+/// each boundary point with a halo point among its neighbours, `(point, index into the halo)`
+/// of the nearest one.
+pub fn fit_boundary(f: &mut OwnFit, halo: &Halo, params: &NormalParams) -> Vec<(u32, u32)> {
+    let mut cross_of: Vec<(u32, u32)> = Vec::new();
+    if f.boundary.is_empty() {
+        return cross_of;
+    }
+    let n = f.rel.len();
+    let params = &NormalParams { k: f.k, ..*params };
+    let mut all = f.rel.clone();
+    all.extend_from_slice(&halo.pos);
+    let (normals, nbrs) = (&mut f.normals, &mut f.nbrs);
+    knn_all(&all, &f.boundary, params.k, Some(f.typical), |i, nb| {
+        let iu = i as usize;
+        normals[iu] = fit_normal(&all, nb, params.robust);
+        keep_nbrs(&mut nbrs[iu * ORIENT_K..(iu + 1) * ORIENT_K], i, nb, n);
+        if let Some(&(_, j)) = nb.iter().find(|&&(_, j)| j as usize >= n) {
+            cross_of.push((i, j - n as u32));
+        }
+    });
+    cross_of
+}
+
+/// The first `dst.len()` neighbours other than `i` itself among the cell's `own` points.
+fn keep_nbrs(dst: &mut [u32], i: u32, nb: &[(f32, u32)], own: usize) {
+    let mut k = 0;
+    for &(_, j) in nb {
+        if k == dst.len() {
+            break;
+        }
+        if j != i && (j as usize) < own {
+            dst[k] = j;
+            k += 1;
+        }
+    }
+}
 
 /// Exact k-nearest neighbours of the points `queries` (indices into `pts`), handed to `f` as
 /// `(squared distance, index)` lists, nearest first, ties by index.
@@ -42,20 +209,9 @@ pub fn knn_all(
             lo[a] = lo[a].min(p[a]);
         }
     }
-    // Median k-th neighbour distance of up to 9 evenly spaced points, unless given.
-    let typical = typical.filter(|t| *t > 0.0).unwrap_or_else(|| {
-        let mut radii = Vec::new();
-        let mut d2: Vec<f32> = Vec::with_capacity(n);
-        for i in (0..n).step_by((n / 9).max(1)).take(9) {
-            d2.clear();
-            let q = pts[i];
-            d2.extend(pts.iter().map(|p| dist2(*p, q)));
-            let (_, v, _) = d2.select_nth_unstable_by(k - 1, |a, b| a.total_cmp(b));
-            radii.push(v.sqrt());
-        }
-        radii.sort_by(|a, b| a.total_cmp(b));
-        radii[radii.len() / 2]
-    });
+    let typical = typical
+        .filter(|t| *t > 0.0)
+        .unwrap_or_else(|| sampled_kth_distance(pts, k));
     let mut d2: Vec<f32> = Vec::new();
     let mut prev_dk2 = typical * typical;
     let mut s = 1.2 * typical;
@@ -181,6 +337,29 @@ pub fn knn_all(
         g = e;
     }
     typical
+}
+
+/// Points sampled by [`sampled_kth_distance`].
+const TYPICAL_SAMPLE: usize = 9;
+
+/// The median k-th neighbour distance (`1 <= k <= pts.len()`) of up to [`TYPICAL_SAMPLE`]
+/// evenly spaced points, by brute force.
+fn sampled_kth_distance(pts: &[[f32; 3]], k: usize) -> f32 {
+    let n = pts.len();
+    let mut radii = Vec::new();
+    let mut d2: Vec<f32> = Vec::with_capacity(n);
+    for i in (0..n)
+        .step_by((n / TYPICAL_SAMPLE).max(1))
+        .take(TYPICAL_SAMPLE)
+    {
+        d2.clear();
+        let q = pts[i];
+        d2.extend(pts.iter().map(|p| dist2(*p, q)));
+        let (_, v, _) = d2.select_nth_unstable_by(k - 1, |a, b| a.total_cmp(b));
+        radii.push(v.sqrt());
+    }
+    radii.sort_by(|a, b| a.total_cmp(b));
+    radii[radii.len() / 2]
 }
 
 /// Sort a short slice in place (a few dozen entries: fewer moves than a general sort).

@@ -231,6 +231,107 @@ impl Node {
     }
 }
 
+/// A neighbour pair across two cells: a point of component `comp` with normal `n`, and point
+/// `to_idx` of cell `to_cell`.
+#[derive(Debug, Clone, Copy)]
+pub struct Cross {
+    /// Component of the point in its own cell.
+    pub comp: u32,
+    /// Its (locally oriented) normal.
+    pub n: [f32; 3],
+    /// The cell of its nearest halo neighbour.
+    pub to_cell: u32,
+    /// That neighbour's index in its cell.
+    pub to_idx: u32,
+}
+
+/// One cell, oriented on its own.
+#[derive(Debug)]
+pub struct CellOrientation {
+    /// Normals, locally oriented; zero where no plane fits.
+    pub normals: Vec<[f32; 3]>,
+    /// Component of each point.
+    pub comp: Vec<u32>,
+    /// The components as nodes of the cross-cell graph.
+    pub nodes: Vec<Node>,
+    /// The cross-cell pairs of its oriented points.
+    pub cross: Vec<Cross>,
+    /// Points whose sign the viewpoint decided.
+    pub by_view: u64,
+    /// Points without a normal (no plane among their neighbours).
+    pub degenerate: u64,
+}
+
+/// Orient the fitted `normals` of a cell's points `pos` along its neighbour graph (`nbrs`:
+/// [`super::ORIENT_K`] own neighbours a point, `u32::MAX` for none), toward `dirs` (each
+/// point's direction to its viewpoint; empty without). `cross_of` pairs points with an index
+/// into the halo, whose `halo_origin` gives the other cell's point.
+pub fn orient_cell(
+    pos: &[[f64; 3]],
+    normals: &[Option<[f32; 3]>],
+    nbrs: &[u32],
+    dirs: &[[f32; 3]],
+    cross_of: &[(u32, u32)],
+    halo_origin: &[(u32, u32)],
+) -> CellOrientation {
+    let n = pos.len();
+    let k = super::ORIENT_K;
+    let mut degenerate = 0u64;
+    let mut normals: Vec<[f32; 3]> = normals
+        .iter()
+        .map(|x| {
+            x.unwrap_or_else(|| {
+                degenerate += 1;
+                [0.0; 3]
+            })
+        })
+        .collect();
+    let mut edges = Vec::with_capacity(n * k);
+    for i in 0..n {
+        if normals[i] == [0.0; 3] {
+            continue;
+        }
+        for &j in &nbrs[i * k..(i + 1) * k] {
+            if j != u32::MAX && normals[j as usize] != [0.0; 3] {
+                edges.push((i as u32, j));
+            }
+        }
+    }
+    let g = Graph::symmetric(n, &edges);
+    drop(edges);
+    let local = orient_local(&mut normals, &g, dirs);
+    let mut nodes = vec![Node::EMPTY; local.components];
+    for i in 0..n {
+        let vote = if dirs.is_empty() {
+            0.0
+        } else {
+            dot(normals[i], dirs[i])
+        };
+        nodes[local.comp[i] as usize].add(pos[i], normals[i], vote);
+    }
+    let cross = cross_of
+        .iter()
+        .filter(|(i, _)| normals[*i as usize] != [0.0; 3])
+        .map(|&(i, h)| {
+            let (to_cell, to_idx) = halo_origin[h as usize];
+            Cross {
+                comp: local.comp[i as usize],
+                n: normals[i as usize],
+                to_cell,
+                to_idx,
+            }
+        })
+        .collect();
+    CellOrientation {
+        normals,
+        comp: local.comp,
+        nodes,
+        cross,
+        by_view: local.by_view,
+        degenerate,
+    }
+}
+
 /// Signs for the nodes: `true` where a node's normals must flip. `edges` are `(a, b, w)` with
 /// `w = Σ nₐ·n_b` over the neighbour pairs joining nodes `a` and `b`. Also returns the number
 /// of trees (connected parts) of the forest.

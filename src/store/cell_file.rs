@@ -10,6 +10,7 @@
 //! | alpha | u16 | 2 |
 //! | intensity | f32 | 4 |
 //! | confidence | f32 | 4 |
+//! | scan | u16 (the input's index, while normals are estimated from viewpoints) | 2 |
 //!
 //! No padding. A cell file is the concatenation of independent zstd frames (one per flush),
 //! which decodes as one stream of records.
@@ -18,6 +19,7 @@ use std::io::Read;
 use std::path::Path;
 
 use crate::error::{Error, IoContext, Location, Result};
+use crate::io::atomic::{self, Durability};
 use crate::types::{Aabb, Attributes, PointBatch};
 
 /// Record layout for an attribute set.
@@ -34,12 +36,13 @@ pub struct RecordLayout {
 impl RecordLayout {
     /// The layout for `attrs`, with f32 positions when `pos_f32`.
     pub fn new(attrs: Attributes, pos_f32: bool) -> RecordLayout {
-        let mut stride = if pos_f32 { 12 } else { 24 };
+        // Field sizes as in the table of the module docs.
+        let mut stride = if pos_f32 { 3 * 4 } else { 3 * 8 };
         if attrs.normal {
-            stride += 12;
+            stride += 3 * 4;
         }
         if attrs.color {
-            stride += 6;
+            stride += 3 * 2;
             if attrs.alpha {
                 stride += 2;
             }
@@ -58,6 +61,17 @@ impl RecordLayout {
             pos_f32,
             stride,
         }
+    }
+
+    /// The same layout with normals.
+    pub fn with_normals(&self) -> RecordLayout {
+        RecordLayout::new(
+            Attributes {
+                normal: true,
+                ..self.attrs
+            },
+            self.pos_f32,
+        )
     }
 
     /// Append point `i` of `b` to `out`.
@@ -169,6 +183,9 @@ fn arr<const N: usize>(s: &[u8]) -> [u8; N] {
     a
 }
 
+/// Records decoded per read of a whole cell file: 64 Ki records, a few MiB of buffer.
+const READ_RECORDS: usize = 1 << 16;
+
 /// Read every record of the cell file at `path`, checking its record count and CRC-32.
 pub fn read_cell_file(
     path: &Path,
@@ -179,7 +196,7 @@ pub fn read_cell_file(
     let mut rd = CellReader::open(path, layout)?;
     let mut out = PointBatch::default();
     let mut buf = Vec::new();
-    while rd.read(1 << 16, &mut out, &mut buf)? > 0 {
+    while rd.read(READ_RECORDS, &mut out, &mut buf)? > 0 {
         if out.len() as u64 > count {
             break;
         }
@@ -204,8 +221,8 @@ pub fn read_cell_file(
     Ok(out)
 }
 
-/// Write `b` as a whole cell file at `path` (through a temporary name); returns the compressed
-/// size and its CRC-32.
+/// Write `b` as a whole cell file at `path` (one zstd frame, through a temporary name, not
+/// synced: see [`Durability::Renamed`]); returns the compressed size and its CRC-32.
 pub fn write_cell_file(
     path: &Path,
     layout: RecordLayout,
@@ -218,11 +235,8 @@ pub fn write_cell_file(
     }
     let z = zstd::bulk::compress(&raw, zstd_level)
         .map_err(|e| Error::Internal(format!("zstd compression failed: {e}")))?;
-    let mut tmp = path.as_os_str().to_owned();
-    tmp.push(".tmp");
-    let tmp = std::path::PathBuf::from(tmp);
-    std::fs::write(&tmp, &z).with_path(&tmp)?;
-    std::fs::rename(&tmp, path).with_path(path)?;
+    // Inside the store's temporary directory, which is committed as a whole.
+    atomic::write(path, &z, Durability::Renamed)?;
     Ok((z.len() as u64, crc32fast::hash(&z)))
 }
 

@@ -4,8 +4,9 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
-use crate::error::{Error, IoContext, Result};
+use crate::error::{Error, Result};
 use crate::io::Format;
+use crate::io::atomic::{self, Durability};
 use crate::types::{Aabb, Attributes, CellKey, Cube, Rigid, Viewpoint};
 
 /// The `format` field of every store manifest.
@@ -164,16 +165,39 @@ impl Manifest {
         })
     }
 
-    /// Write to `dir/manifest.json`, synced.
+    /// Write to `dir/manifest.json` atomically, synced.
     pub fn save(&self, dir: &Path) -> Result<()> {
         let path = dir.join(MANIFEST);
         let text = serde_json::to_string_pretty(self)
             .map_err(|e| Error::Internal(format!("manifest serialisation: {e}")))?;
-        let mut f = std::fs::File::create(&path).with_path(&path)?;
-        use std::io::Write;
-        f.write_all(text.as_bytes()).with_path(&path)?;
-        f.write_all(b"\n").with_path(&path)?;
-        f.sync_all().with_path(&path)?;
-        Ok(())
+        let mut bytes = text.into_bytes();
+        bytes.push(b'\n');
+        atomic::write(&path, &bytes, Durability::Synced)
     }
+}
+
+/// The manifest's `record_fields`: the fields of a record in order, with their types (see
+/// the table in [`crate::store::cell_file`]).
+pub fn record_fields(a: Attributes, pos_f32: bool) -> Vec<String> {
+    let t = if pos_f32 { "f32" } else { "f64" };
+    let mut v: Vec<String> = ["x", "y", "z"].map(|c| format!("{c}:{t}")).to_vec();
+    if a.normal {
+        v.extend(["nx:f32", "ny:f32", "nz:f32"].map(String::from));
+    }
+    if a.color {
+        v.extend(["red:u16", "green:u16", "blue:u16"].map(String::from));
+        if a.alpha {
+            v.push("alpha:u16".into());
+        }
+    }
+    if a.intensity {
+        v.push("intensity:f32".into());
+    }
+    if a.confidence {
+        v.push("confidence:f32".into());
+    }
+    if a.source {
+        v.push("scan:u16".into());
+    }
+    v
 }

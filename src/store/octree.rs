@@ -7,9 +7,9 @@
 //! split into its non-empty children. A grid cell that is still too full becomes an
 //! *oversized* leaf, to be split again by a finer count of its own points. Leaves come out in
 //! Morton order, each covering a contiguous range of grid cells, so the leaf of a point is a
-//! binary search over the range starts.
+//! binary search over the range starts. [`GridMap`] gives a point's grid cell.
 
-use crate::types::CellKey;
+use crate::types::{CellKey, Cube, morton3};
 
 /// A leaf of the hierarchy.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -101,6 +101,43 @@ pub fn count_levels(n: u64, max_points: u64, max_levels: u32) -> u32 {
         l += 1;
     }
     l
+}
+
+/// Maps points to Morton indices on the grid `levels` below a base cell.
+#[derive(Debug, Clone, Copy)]
+pub struct GridMap {
+    origin: [f64; 3],
+    inv: f64,
+    base: [u64; 3],
+    top: u64,
+}
+
+impl GridMap {
+    /// The grid `levels` below cell `base` of `cube`.
+    pub fn new(cube: &Cube, base: CellKey, levels: u32) -> GridMap {
+        let (bl, bc) = base.decode();
+        let level = bl + levels;
+        GridMap {
+            origin: cube.origin,
+            inv: (1u64 << level) as f64 / cube.size,
+            base: bc.map(|c| (c as u64) << levels),
+            top: (1u64 << levels) - 1,
+        }
+    }
+
+    /// The grid cell of `p`, clamped into the grid. Agrees with [`Cube::cell_coords`]: the
+    /// scale is a power of two times the cube's, so both floor the same products.
+    #[inline(always)]
+    pub fn index(&self, p: [f64; 3]) -> u64 {
+        let mut c = [0u32; 3];
+        for k in 0..3 {
+            let v = (p[k] - self.origin[k]) * self.inv;
+            // Truncation is floor for v > 0; v <= 0 (and NaN) clamp to 0.
+            let g = if v > 0.0 { v as u64 } else { 0 };
+            c[k] = g.saturating_sub(self.base[k]).min(self.top) as u32;
+        }
+        morton3(c)
+    }
 }
 
 #[cfg(test)]

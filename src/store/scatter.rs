@@ -1,4 +1,5 @@
-//! Scatter: points grouped by leaf, appended to per-leaf buffers, flushed as zstd frames.
+//! Pass 3, scatter: points grouped by leaf, appended to per-leaf buffers, flushed as zstd
+//! frames.
 //!
 //! Determinism: chunks are grouped in parallel but appended in chunk order, and the flush
 //! policy depends only on the sequence of appends, so a cell file's bytes do not depend on
@@ -12,11 +13,81 @@ use std::path::{Path, PathBuf};
 use rayon::prelude::*;
 
 use crate::error::{Error, IoContext, Result};
+use crate::exec::Ctx;
+use crate::io::ChunkSpec;
+use crate::store::Sizes;
 use crate::store::cell_file::RecordLayout;
-use crate::types::{Aabb, CellKey, PointBatch};
+use crate::store::input::Inputs;
+use crate::store::octree::{GridMap, Hierarchy};
+use crate::types::{Aabb, CellKey, Cube, PointBatch};
 
 /// Uncompressed size of a frame, in bytes (rounded down to whole records).
 pub const FRAME_BYTES: usize = 2 << 20;
+
+/// Capacity of the writer thread's buffer per open cell file: large sequential writes.
+const WRITE_BUFFER_BYTES: usize = 1 << 20;
+
+/// Read every input once more, wave by wave, and scatter its points into the leaves of
+/// `hier` through `sc`; returns the cells written. Chunks are loaded and grouped in parallel
+/// within a wave and appended in chunk order.
+pub fn scatter_pass(
+    inputs: &Inputs,
+    chunks: &[(usize, ChunkSpec)],
+    sizes: &Sizes,
+    cube: &Cube,
+    hier: &Hierarchy,
+    mut sc: Scatter,
+    ctx: &Ctx,
+) -> Result<Vec<CellOut>> {
+    let stage = ctx.progress.stage("scatter", Some(inputs.total), "points");
+    for wave_chunks in chunks.chunks(sizes.wave) {
+        // The whole wave is admitted at once: its outputs live until they are appended.
+        let _permit = ctx.budget.acquire(
+            wave_chunks.len() as u64 * sizes.chunk_bytes,
+            "a wave of chunks of points",
+        )?;
+        let outs: Vec<Result<Grouped>> = ctx.pool.install(|| {
+            wave_chunks
+                .par_iter()
+                .map(|(ri, spec)| {
+                    let mut batch = PointBatch::default();
+                    inputs.load(&mut batch, *ri, spec)?;
+                    let g = group_batch(&batch, cube, hier, &inputs.layout)?;
+                    stage.inc(spec.count);
+                    Ok(g)
+                })
+                .collect()
+        });
+        for o in outs {
+            sc.push(&ctx.pool, &o?)?;
+        }
+    }
+    let cells_out = sc.finish(&ctx.pool)?;
+    stage.finish(None);
+    Ok(cells_out)
+}
+
+/// Group the points of `b` by their leaf of `h`, a hierarchy over `cube`.
+pub fn group_batch(
+    b: &PointBatch,
+    cube: &Cube,
+    h: &Hierarchy,
+    layout: &RecordLayout,
+) -> Result<Grouped> {
+    let map = GridMap::new(cube, h.base, h.levels);
+    let mut leaf = Vec::with_capacity(b.len());
+    for p in &b.pos {
+        let m = map.index(*p);
+        leaf.push(h.leaf_of(m).ok_or_else(|| {
+            Error::Internal(format!(
+                "point {p:?} fell in no cell (grid cell {m}); input changed while reading?"
+            ))
+        })?);
+    }
+    let mut g = Grouped::default();
+    group(b, &leaf, h.leaves.len(), layout, &mut g);
+    Ok(g)
+}
 
 /// One chunk's records, grouped by leaf.
 #[derive(Debug, Default)]
@@ -129,7 +200,11 @@ impl FrameWriter {
                             .append(true)
                             .open(&path)
                             .with_path(&path)?;
-                        open = Some((i, path, std::io::BufWriter::with_capacity(1 << 20, f)));
+                        open = Some((
+                            i,
+                            path,
+                            std::io::BufWriter::with_capacity(WRITE_BUFFER_BYTES, f),
+                        ));
                     }
                     if let Some((_, p, w)) = open.as_mut() {
                         w.write_all(&z).with_path(p)?;

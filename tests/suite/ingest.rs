@@ -273,3 +273,65 @@ fn identical_points_stay_in_one_finest_cell() {
     assert_eq!(st.manifest.point_count, 3001);
     assert_eq!(st.manifest.cells.iter().map(|c| c.count).max(), Some(3000));
 }
+
+/// The library's two-step ingest: the staged store is invisible until committed, dropping it
+/// leaves nothing behind, and the pipeline's ingest gives the same store as the CLI.
+#[test]
+fn staged_store_appears_only_on_commit() {
+    use scanflow::exec::Ctx;
+    use scanflow::exec::progress::{Mode, Progress};
+    use scanflow::io::InputSpec;
+    use scanflow::pipeline::ingest::{IngestParams, ingest};
+    use scanflow::store::{StoreParams, stage};
+
+    let d = tempfile::tempdir().unwrap();
+    let ply = d.path().join("b.ply");
+    ok(&["synth", "bumpy", "--points", "20000", "-o", s(&ply)]);
+    let ctx = Ctx::new(2, 256 << 20, Progress::new(Mode::Quiet)).unwrap();
+    let inputs = [InputSpec::plain(&ply)];
+    let out = d.path().join("b.store");
+    let names = || -> Vec<String> {
+        let mut v: Vec<String> = std::fs::read_dir(d.path())
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        v.sort();
+        v
+    };
+
+    // Estimating normals: staged without them, dropped uncommitted.
+    let params = StoreParams {
+        max_cell_points: 3000,
+        normals: scanflow::store::NormalsMode::Estimate,
+        ..Default::default()
+    };
+    let staged = stage(&inputs, &out, &params, &ctx).unwrap();
+    assert!(staged.wants_normals() && !staged.layout().attrs.normal);
+    assert!(staged.cells().len() > 3 && staged.dir().is_dir());
+    assert!(!out.exists());
+    drop(staged);
+    assert_eq!(names(), ["b.ply", "b.truth.json"]);
+
+    // Inputs' normals: committed as they are, identical to the CLI's store.
+    let staged = stage(&inputs, &out, &StoreParams::default(), &ctx).unwrap();
+    assert!(!staged.wants_normals());
+    let est = scanflow::store::manifest::EstimatedNormals {
+        k: 20,
+        k_max: 20,
+        robust: false,
+        degenerate: 0,
+        by_viewpoint: 0,
+        by_propagation: 0,
+        components: 0,
+    };
+    assert!(staged.commit(Some((est, 0.0))).is_err());
+    assert_eq!(names(), ["b.ply", "b.truth.json"]);
+    let st = ingest(&inputs, &out, &IngestParams::default(), &ctx).unwrap();
+    assert_eq!(st.points, 20_000);
+    assert!(st.normals.is_none());
+    let cli = d.path().join("cli.store");
+    ok(&["ingest", s(&ply), "-o", s(&cli), "--progress", "none"]);
+    assert_eq!(tree_bytes(&out), tree_bytes(&cli));
+    let err = ingest(&inputs, &out, &IngestParams::default(), &ctx).unwrap_err();
+    assert!(err.to_string().contains("already exists"), "{err}");
+}
