@@ -28,10 +28,14 @@ pub fn quantile(v: &mut [f64], q: f64) -> f64 {
 /// `(seed, stream, i)` only, so results do not depend on the number of threads.
 const SAMPLE_CHUNK: usize = 4096;
 
-/// Generator streams, so that the two directions never share random numbers.
+/// Generator stream of the samples on the checked mesh (streams keep the two directions from
+/// sharing random numbers).
 const STREAM_MESH: u64 = 1;
+/// Generator stream of the samples on an exact surface.
 const STREAM_TRUTH: u64 = 2;
+/// Generator stream of the samples on a reference mesh.
 const STREAM_REFERENCE: u64 = 3;
+/// Generator stream of the subset of a large reference point set.
 const STREAM_SUBSET: u64 = 4;
 
 /// Map `f` over `n` samples drawn by `draw`, in parallel chunks; the results are in sample

@@ -182,12 +182,18 @@ fn comparison(
     }
 }
 
+/// Most points reserved up front for a reference point set (384 MiB of positions), so that
+/// a header announcing more than the file holds cannot reserve without bound.
+const MAX_RESERVED_POINTS: u64 = 1 << 24;
+/// Points read per chunk from a reference point file.
+const READ_CHUNK_POINTS: u64 = 1 << 20;
+
 /// Every point of a point file.
 fn read_points(path: &Path) -> Result<Vec<[f64; 3]>> {
     let reader = crate::io::open(path)?;
-    let mut pts = Vec::with_capacity(reader.len().min(1 << 24) as usize);
+    let mut pts = Vec::with_capacity(reader.len().min(MAX_RESERVED_POINTS) as usize);
     let mut batch = PointBatch::default();
-    for chunk in reader.chunks(1 << 20)? {
+    for chunk in reader.chunks(READ_CHUNK_POINTS)? {
         batch.clear();
         reader.read_chunk(&chunk, false, &mut batch)?;
         pts.extend_from_slice(&batch.pos);

@@ -63,7 +63,9 @@ pub struct PlyReader {
     attrs: Attributes,
 }
 
+/// Ascii: a position is recorded every this many vertex lines (chunks are cut there).
 const ASCII_INDEX_STEP: u64 = 1 << 16;
+/// Bytes mapped at a time when walking lists or indexing ascii lines.
 const SCAN_WINDOW: u64 = 64 << 20;
 
 impl PlyReader {
