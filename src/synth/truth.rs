@@ -131,7 +131,7 @@ impl Truth {
         }
     }
 
-    /// Read the surface from a truth file written by [`synth`].
+    /// Read the surface from a truth file written by [`synth`](crate::synth::synth).
     pub fn load(path: &Path) -> Result<Truth> {
         TruthFile::load(path).map(|f| f.truth)
     }
