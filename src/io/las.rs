@@ -24,6 +24,10 @@ const BATCH: u64 = 1 << 16;
 const READ_BUFFER: usize = 1 << 20;
 /// Byte offsets of the x, y and z scale factors in the LAS header.
 const SCALE_AT: [u64; 3] = [131, 139, 147];
+/// Byte offset of the version (major, minor) in the LAS header.
+const VERSION_AT: u64 = 24;
+/// Byte offset of the offset to point data in the LAS header.
+const DATA_OFFSET_AT: u64 = 96;
 
 /// Run `f`, turning a panic inside the `las`/`laz` crates (on corrupt data) into an error.
 fn guard<T>(f: impl FnOnce() -> T) -> std::result::Result<T, String> {
@@ -46,6 +50,133 @@ fn aligned_target(target: u64, laz_chunk: Option<u64>) -> u64 {
 
 fn is_eof(e: &las::Error) -> bool {
     matches!(e, las::Error::Io(io) if io.kind() == std::io::ErrorKind::UnexpectedEof)
+}
+
+/// Check the `LASF` signature in the first 4 bytes of `file`.
+fn check_signature(file: &mut File, path: &Path) -> Result<()> {
+    let mut magic = Vec::with_capacity(4);
+    file.take(4).read_to_end(&mut magic).with_path(path)?;
+    if magic != b"LASF" {
+        return Err(Error::format(
+            path,
+            Location::Byte(0),
+            format!(
+                "not a LAS file: expected the signature \"LASF\", found \"{}\"",
+                magic.escape_ascii()
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Read the raw header and check what the readers rely on: the version, where the point data
+/// starts, and the scale factors.
+fn read_raw_header(path: &Path, file_len: u64) -> Result<las::raw::Header> {
+    let file = File::open(path).with_path(path)?;
+    let raw = las::raw::Header::read_from(BufReader::new(file)).map_err(|e| {
+        if is_eof(&e) {
+            Error::format(
+                path,
+                Location::Byte(file_len),
+                format!("truncated LAS header: the file ends after {file_len} bytes"),
+            )
+        } else {
+            Error::input(path, format!("invalid LAS header: {e}"))
+        }
+    })?;
+    let (major, minor) = (raw.version.major, raw.version.minor);
+    if major != 1 || minor > 4 {
+        return Err(Error::format(
+            path,
+            Location::Byte(VERSION_AT),
+            format!("unsupported LAS version {major}.{minor}, expected 1.0 to 1.4"),
+        ));
+    }
+    let data_start = u64::from(raw.offset_to_point_data);
+    if data_start > file_len {
+        return Err(Error::format(
+            path,
+            Location::Byte(DATA_OFFSET_AT),
+            format!(
+                "the header puts the point data at byte {data_start}, but the file ends after {file_len} bytes"
+            ),
+        ));
+    }
+    let scales = [raw.x_scale_factor, raw.y_scale_factor, raw.z_scale_factor];
+    for ((axis, s), at) in ["x", "y", "z"].into_iter().zip(scales).zip(SCALE_AT) {
+        if !s.is_finite() || s == 0.0 {
+            return Err(Error::format(
+                path,
+                Location::Byte(at),
+                format!("{axis} scale factor is {s}, expected a finite non-zero number"),
+            ));
+        }
+    }
+    Ok(raw)
+}
+
+/// Open the `las` decoder on `path` (its header, variable-length records and, for LAZ, the
+/// LASzip record and chunk table).
+fn open_decoder(
+    path: &Path,
+    file_len: u64,
+    data_start: u64,
+    raw: &las::raw::Header,
+) -> Result<las::Reader> {
+    // The compression bit, as the las crate tests it.
+    let raw_compressed = raw.point_data_record_format & 0x80 != 0;
+    let file = File::open(path).with_path(path)?;
+    guard(|| las::Reader::new(BufReader::new(file)))
+        .map_err(|p| Error::input(path, format!("invalid LAS header (decoder failed: {p})")))?
+        .map_err(|e| {
+            if is_eof(&e) {
+                Error::format(
+                    path,
+                    Location::Byte(file_len),
+                    format!(
+                        "truncated LAS header or variable-length records: the file ends after {file_len} bytes"
+                    ),
+                )
+            } else if raw_compressed {
+                Error::format(
+                    path,
+                    Location::Byte(data_start),
+                    format!(
+                        "cannot open the LASzip-compressed point data (LASzip record or chunk table; is the file truncated?): {e}"
+                    ),
+                )
+            } else {
+                Error::input(path, format!("invalid LAS header: {e}"))
+            }
+        })
+}
+
+/// Check that an uncompressed file holds the `len` records of `record_len` bytes from byte
+/// `data_start` its header declares.
+fn check_record_bytes(
+    path: &Path,
+    file_len: u64,
+    data_start: u64,
+    len: u64,
+    record_len: u64,
+) -> Result<()> {
+    let need = len
+        .checked_mul(record_len)
+        .and_then(|b| b.checked_add(data_start));
+    if need.is_none_or(|need| need > file_len) {
+        let complete = (file_len - data_start) / record_len.max(1);
+        return Err(Error::format(
+            path,
+            Location::Element {
+                index: complete,
+                byte: data_start + complete * record_len,
+            },
+            format!(
+                "truncated: the header declares {len} points of {record_len} bytes from byte {data_start}, but the file ends after {file_len} bytes, within or before point {complete}"
+            ),
+        ));
+    }
+    Ok(())
 }
 
 /// A LAS or LAZ file opened for reading.
@@ -72,88 +203,11 @@ impl LasReader {
     pub fn open(path: &Path) -> Result<LasReader> {
         let mut file = File::open(path).with_path(path)?;
         let file_len = file.metadata().with_path(path)?.len();
-        let mut magic = Vec::with_capacity(4);
-        (&mut file)
-            .take(4)
-            .read_to_end(&mut magic)
-            .with_path(path)?;
-        if magic != b"LASF" {
-            return Err(Error::format(
-                path,
-                Location::Byte(0),
-                format!(
-                    "not a LAS file: expected the signature \"LASF\", found \"{}\"",
-                    magic.escape_ascii()
-                ),
-            ));
-        }
-        let file = File::open(path).with_path(path)?;
-        let raw = las::raw::Header::read_from(BufReader::new(file)).map_err(|e| {
-            if is_eof(&e) {
-                Error::format(
-                    path,
-                    Location::Byte(file_len),
-                    format!("truncated LAS header: the file ends after {file_len} bytes"),
-                )
-            } else {
-                Error::input(path, format!("invalid LAS header: {e}"))
-            }
-        })?;
+        check_signature(&mut file, path)?;
+        let raw = read_raw_header(path, file_len)?;
         let (major, minor) = (raw.version.major, raw.version.minor);
-        if major != 1 || minor > 4 {
-            return Err(Error::format(
-                path,
-                Location::Byte(24),
-                format!("unsupported LAS version {major}.{minor}, expected 1.0 to 1.4"),
-            ));
-        }
         let data_start = u64::from(raw.offset_to_point_data);
-        if data_start > file_len {
-            return Err(Error::format(
-                path,
-                Location::Byte(96),
-                format!(
-                    "the header puts the point data at byte {data_start}, but the file ends after {file_len} bytes"
-                ),
-            ));
-        }
-        let scales = [raw.x_scale_factor, raw.y_scale_factor, raw.z_scale_factor];
-        for ((axis, s), at) in ["x", "y", "z"].into_iter().zip(scales).zip(SCALE_AT) {
-            if !s.is_finite() || s == 0.0 {
-                return Err(Error::format(
-                    path,
-                    Location::Byte(at),
-                    format!("{axis} scale factor is {s}, expected a finite non-zero number"),
-                ));
-            }
-        }
-
-        // The compression bit, as the las crate tests it.
-        let raw_compressed = raw.point_data_record_format & 0x80 != 0;
-        let file = File::open(path).with_path(path)?;
-        let reader = guard(|| las::Reader::new(BufReader::new(file)))
-            .map_err(|p| Error::input(path, format!("invalid LAS header (decoder failed: {p})")))?
-            .map_err(|e| {
-                if is_eof(&e) {
-                    Error::format(
-                        path,
-                        Location::Byte(file_len),
-                        format!(
-                            "truncated LAS header or variable-length records: the file ends after {file_len} bytes"
-                        ),
-                    )
-                } else if raw_compressed {
-                    Error::format(
-                        path,
-                        Location::Byte(data_start),
-                        format!(
-                            "cannot open the LASzip-compressed point data (LASzip record or chunk table; is the file truncated?): {e}"
-                        ),
-                    )
-                } else {
-                    Error::input(path, format!("invalid LAS header: {e}"))
-                }
-            })?;
+        let reader = open_decoder(path, file_len, data_start, &raw)?;
         let header = reader.header();
         let fmt = header.point_format();
         let compressed = fmt.is_compressed;
@@ -162,22 +216,7 @@ impl LasReader {
         let point_format = fmt.to_u8().unwrap_or(raw.point_data_record_format & 0x3f);
 
         if !compressed {
-            let need = len
-                .checked_mul(record_len)
-                .and_then(|b| b.checked_add(data_start));
-            if need.is_none_or(|need| need > file_len) {
-                let complete = (file_len - data_start) / record_len.max(1);
-                return Err(Error::format(
-                    path,
-                    Location::Element {
-                        index: complete,
-                        byte: data_start + complete * record_len,
-                    },
-                    format!(
-                        "truncated: the header declares {len} points of {record_len} bytes from byte {data_start}, but the file ends after {file_len} bytes, within or before point {complete}"
-                    ),
-                ));
-            }
+            check_record_bytes(path, file_len, data_start, len, record_len)?;
         }
 
         let laz_chunk = if compressed {

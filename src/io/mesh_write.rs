@@ -1,8 +1,9 @@
-//! Streaming binary-little-endian PLY mesh writer (DESIGN.md step 5).
+//! Streaming binary-little-endian PLY mesh writer (ARCHITECTURE.md step 5).
 //!
 //! [`MeshPlyWriter`] takes vertices and triangles as the welder emits them, without knowing
 //! their counts in advance, in memory independent of the mesh size. Vertices go to a temporary
-//! file next to the final one (`OUT.ply.tmp-<pid>`), after room reserved for the header;
+//! file next to the final one (`OUT.ply.tmp-<pid>`, an [`AtomicFile`]), after room reserved
+//! for the header;
 //! faces go to a second temporary file (`OUT.ply.tmp-<pid>.faces`). [`MeshPlyWriter::finish`]
 //! appends the faces to the vertices, writes the header with the final counts into the
 //! reserved room, syncs and renames the file into place, so a reader never sees a half-written
@@ -34,11 +35,12 @@
 //! both). Triangles are counter-clockwise seen from outside, as extracted
 //! ([`crate::extract`]).
 
-use std::ffi::OsString;
 use std::fs::File;
 use std::io::{BufWriter, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 
+use super::atomic::{AtomicFile, with_suffix};
+use super::sink::Sink;
 use crate::error::{Error, IoContext, Result};
 
 /// Size of each write buffer.
@@ -63,12 +65,13 @@ pub struct MeshWriteStats {
 pub struct MeshPlyWriter {
     /// The name the file gets on [`MeshPlyWriter::finish`].
     final_path: PathBuf,
-    /// Header room and vertices, then the whole file (empty once renamed).
+    /// Header room and vertices, then the whole file (the name errors refer to).
     tmp_path: PathBuf,
     /// Face records until `finish` (empty once removed).
     faces_path: PathBuf,
-    /// The open vertex file; `None` once finished or after a failed write.
-    out: Option<BufWriter<File>>,
+    /// The open vertex file; `None` once finished or after a failed write. Dropping it
+    /// removes the temporary file.
+    out: Option<BufWriter<Sink>>,
     /// The open face file; `None` once finished or after a failed write.
     faces: Option<BufWriter<File>>,
     /// Whether vertices carry a colour.
@@ -80,13 +83,6 @@ pub struct MeshPlyWriter {
     faces_written: u64,
     /// Bytes reserved for the header.
     header_bytes: usize,
-}
-
-/// `path` with `suffix` appended to its file name.
-fn with_suffix(path: &Path, suffix: &str) -> PathBuf {
-    let mut s: OsString = path.as_os_str().to_owned();
-    s.push(suffix);
-    PathBuf::from(s)
 }
 
 /// The header lines before the padding comment, and after it.
@@ -155,14 +151,14 @@ impl MeshPlyWriter {
         if path.as_os_str().is_empty() {
             return Err(Error::Usage("empty output file name".to_string()));
         }
-        let tmp_path = with_suffix(path, &format!(".tmp-{}", std::process::id()));
+        let file = AtomicFile::create(path)?;
+        let tmp_path = file.tmp_path().to_path_buf();
         let faces_path = with_suffix(&tmp_path, ".faces");
-        let file = File::create(&tmp_path).with_path(&tmp_path)?;
         let mut w = MeshPlyWriter {
             final_path: path.to_path_buf(),
             tmp_path,
             faces_path: PathBuf::new(),
-            out: Some(BufWriter::with_capacity(BUF_BYTES, file)),
+            out: Some(Sink::buffered(file, BUF_BYTES)),
             faces: None,
             with_color,
             with_intensity,
@@ -322,20 +318,22 @@ impl MeshPlyWriter {
     }
 
     /// Append the faces after the vertices, write the real header with the final counts into
-    /// the room reserved at the start, sync, and rename the file to its final name. On error
-    /// both temporary files are removed and the final path is left as it was.
+    /// the room reserved at the start, and commit the file ([`AtomicFile::commit`]: sync,
+    /// rename to its final name, directory sync). On error both temporary files are removed and
+    /// the final path is left as it was.
     pub fn finish(mut self) -> Result<MeshWriteStats> {
         let (Some(out), Some(faces)) = (self.out.take(), self.faces.take()) else {
             return Err(self.closed());
         };
-        let mut file = out
+        let Sink(mut atomic) = out
             .into_inner()
             .map_err(|e| Error::io(&self.tmp_path, e.into_error()))?;
+        let file = atomic.file();
         let mut faces = faces
             .into_inner()
             .map_err(|e| Error::io(&self.faces_path, e.into_error()))?;
         faces.seek(SeekFrom::Start(0)).with_path(&self.faces_path)?;
-        let copied = std::io::copy(&mut faces, &mut file).with_path(&self.tmp_path)?;
+        let copied = std::io::copy(&mut faces, file).with_path(&self.tmp_path)?;
         drop(faces);
         let face_bytes = self.faces_written * FACE_BYTES;
         if copied != face_bytes {
@@ -360,9 +358,7 @@ impl MeshPlyWriter {
         }
         file.seek(SeekFrom::Start(0)).with_path(&self.tmp_path)?;
         file.write_all(h.as_bytes()).with_path(&self.tmp_path)?;
-        file.sync_all().with_path(&self.tmp_path)?;
         let bytes = file.metadata().with_path(&self.tmp_path)?.len();
-        drop(file);
         let stride = 12 + 3 * self.with_color as u64 + 4 * self.with_intensity as u64;
         let expect = self.header_bytes as u64 + self.vertices * stride + face_bytes;
         if bytes != expect {
@@ -371,10 +367,7 @@ impl MeshPlyWriter {
                 self.tmp_path.display()
             )));
         }
-        std::fs::rename(&self.tmp_path, &self.final_path).with_path(&self.final_path)?;
-        // Renamed: nothing left for Drop to remove but the faces.
-        self.tmp_path = PathBuf::new();
-        crate::io::ply_write::sync_parent_dir(&self.final_path);
+        atomic.commit()?;
         let _ = std::fs::remove_file(&self.faces_path);
         self.faces_path = PathBuf::new();
         Ok(MeshWriteStats {
@@ -387,13 +380,12 @@ impl MeshPlyWriter {
 
 impl Drop for MeshPlyWriter {
     fn drop(&mut self) {
-        // Close before removing (some platforms cannot remove an open file).
+        // Close before removing (some platforms cannot remove an open file); dropping the
+        // vertex file removes it.
         self.out = None;
         self.faces = None;
-        for p in [&self.tmp_path, &self.faces_path] {
-            if !p.as_os_str().is_empty() {
-                let _ = std::fs::remove_file(p);
-            }
+        if !self.faces_path.as_os_str().is_empty() {
+            let _ = std::fs::remove_file(&self.faces_path);
         }
     }
 }

@@ -5,6 +5,30 @@
 //! memory-mapped window (so resident memory stays proportional to the chunks in flight,
 //! never to the file). Locations in errors are absolute: element index and byte offset (binary)
 //! or line (text), counted from the start of the file.
+//!
+//! # Module map
+//!
+//! Readers ([`open`] picks one by content and extension):
+//!
+//! * [`ply`]: PLY points, ascii and binary (`header.rs` the header, `decode.rs` the records);
+//! * [`las`]: LAS and LAZ;
+//! * [`xyz`]: XYZ / PTS text (`text.rs` the layouts, tokenizer and line walk, `decode.rs` the
+//!   values);
+//! * [`mesh_read`]: PLY meshes, vertices through [`ply`] and the `face` element (`faces.rs`),
+//!   for `scanflow check` and tests;
+//! * [`conf`]: the `.conf` scan list (files and their rigid transforms);
+//! * [`mmap`]: the memory-mapped window every binary and text reader reads through.
+//!
+//! Writers, each streaming in memory independent of the file's size:
+//!
+//! * [`ply_write`]: point PLY ([`ply_write::PointPlyWriter`]);
+//! * [`mesh_write`]: the streamed mesh PLY of ARCHITECTURE.md step 5
+//!   ([`mesh_write::MeshPlyWriter`]).
+//!
+//! The atomic writer, [`atomic`], is the one way any output appears under its final name:
+//! written under `NAME.tmp-<pid>`, synced, renamed, the directory synced; removed when dropped
+//! before that. Both writers above (through a buffered `sink.rs`) and every other output of
+//! scanflow go through it.
 
 pub mod atomic;
 pub mod conf;
@@ -14,6 +38,7 @@ pub mod mesh_write;
 pub mod mmap;
 pub mod ply;
 pub mod ply_write;
+mod sink;
 pub mod xyz;
 
 use std::path::{Path, PathBuf};

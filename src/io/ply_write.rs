@@ -3,8 +3,8 @@
 //! [`PointPlyWriter`] writes a header announcing a fixed number of points, then appends
 //! [`PointBatch`]es as they come, so that memory stays proportional to one batch whatever the
 //! size of the file. Bytes go to a temporary file next to the final one
-//! (`OUT.ply.tmp-<pid>`); [`PointPlyWriter::finish`] checks the count, flushes, syncs and
-//! renames it into place, so a reader never sees a half-written file under the final name. A
+//! (`OUT.ply.tmp-<pid>`, an [`AtomicFile`]); [`PointPlyWriter::finish`] checks the count,
+//! flushes, syncs and renames it into place, so a reader never sees a half-written file under the final name. A
 //! writer dropped without `finish` (an error upstream, a panic) removes its temporary file.
 //!
 //! Layout of one vertex record, in this order, each part only when its attribute was asked
@@ -12,11 +12,11 @@
 //! `intensity` (float32), `confidence` (float32). Colours are the high byte of the 16-bit
 //! channels of [`PointBatch::color`].
 
-use std::ffi::OsString;
-use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
+use super::atomic::AtomicFile;
+use super::sink::Sink;
 use crate::error::{Error, IoContext, Result};
 use crate::types::{Attributes, PointBatch};
 
@@ -31,10 +31,11 @@ const ENCODE_BLOCK: usize = 4096;
 pub struct PointPlyWriter {
     /// The name the file gets on [`PointPlyWriter::finish`].
     final_path: PathBuf,
-    /// Where the bytes go until then.
+    /// Where the bytes go until then (the name errors while writing refer to).
     tmp_path: PathBuf,
-    /// The open temporary file; `None` once finished or after a failed finish.
-    out: Option<BufWriter<File>>,
+    /// The open temporary file; `None` once finished or after a failed write. Dropping it
+    /// removes the temporary file.
+    out: Option<BufWriter<Sink>>,
     /// Attributes written per point.
     attrs: Attributes,
     /// Points announced in the header.
@@ -45,13 +46,6 @@ pub struct PointPlyWriter {
     stride: usize,
     /// Scratch for encoding a block of records.
     scratch: Vec<u8>,
-}
-
-/// `path` with `.tmp-<pid>` appended to its file name.
-fn temp_name(path: &Path) -> PathBuf {
-    let mut s: OsString = path.as_os_str().to_owned();
-    s.push(format!(".tmp-{}", std::process::id()));
-    PathBuf::from(s)
 }
 
 /// The PLY header for `count` points carrying `attrs`.
@@ -106,25 +100,6 @@ fn record_bytes(attrs: Attributes) -> usize {
     n
 }
 
-/// Sync the directory holding `path`, so that a rename into it is durable. Best effort: some
-/// platforms and file systems cannot open or sync a directory, which is no reason to fail.
-pub(crate) fn sync_parent_dir(path: &Path) {
-    #[cfg(unix)]
-    {
-        let parent = match path.parent() {
-            Some(p) if !p.as_os_str().is_empty() => p,
-            _ => Path::new("."),
-        };
-        if let Ok(d) = File::open(parent) {
-            let _ = d.sync_all();
-        }
-    }
-    #[cfg(not(unix))]
-    {
-        let _ = path;
-    }
-}
-
 impl PointPlyWriter {
     /// Start writing `count` points carrying `attrs` to `path`.
     ///
@@ -141,12 +116,11 @@ impl PointPlyWriter {
         if path.as_os_str().is_empty() {
             return Err(Error::Usage("empty output file name".to_string()));
         }
-        let tmp_path = temp_name(path);
-        let file = File::create(&tmp_path).with_path(&tmp_path)?;
+        let file = AtomicFile::create(path)?;
         let mut w = PointPlyWriter {
             final_path: path.to_path_buf(),
-            tmp_path,
-            out: Some(BufWriter::with_capacity(BUF_BYTES, file)),
+            tmp_path: file.tmp_path().to_path_buf(),
+            out: Some(Sink::buffered(file, BUF_BYTES)),
             attrs,
             count,
             written: 0,
@@ -180,7 +154,7 @@ impl PointPlyWriter {
     }
 
     /// The open file, or an error once the writer is unusable.
-    fn sink(&mut self) -> Result<&mut BufWriter<File>> {
+    fn sink(&mut self) -> Result<&mut BufWriter<Sink>> {
         match self.out.as_mut() {
             Some(w) => Ok(w),
             None => Err(Error::Internal(format!(
@@ -308,9 +282,9 @@ impl PointPlyWriter {
         result
     }
 
-    /// Check that exactly the announced number of points was written, flush, sync the file to
-    /// disk and rename it to its final name. On error the temporary file is removed and the
-    /// final path is left as it was.
+    /// Check that exactly the announced number of points was written, flush, and commit the
+    /// file ([`AtomicFile::commit`]: sync, rename to its final name, directory sync). On error
+    /// the temporary file is removed and the final path is left as it was.
     pub fn finish(mut self) -> Result<()> {
         if self.written != self.count {
             return Err(Error::Internal(format!(
@@ -329,32 +303,17 @@ impl PointPlyWriter {
                 )));
             }
         };
-        let file = out
+        let Sink(file) = out
             .into_inner()
             .map_err(|e| Error::io(&self.tmp_path, e.into_error()))?;
-        file.sync_all().with_path(&self.tmp_path)?;
-        drop(file);
-        std::fs::rename(&self.tmp_path, &self.final_path).with_path(&self.final_path)?;
-        // Renamed: nothing left for Drop to remove.
-        self.tmp_path = PathBuf::new();
-        sync_parent_dir(&self.final_path);
-        Ok(())
-    }
-}
-
-impl Drop for PointPlyWriter {
-    fn drop(&mut self) {
-        // Close before removing (some platforms cannot remove an open file).
-        self.out = None;
-        if !self.tmp_path.as_os_str().is_empty() {
-            let _ = std::fs::remove_file(&self.tmp_path);
-        }
+        file.commit()
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::io::atomic::temp_name;
 
     fn read_f32(b: &[u8], at: usize) -> f32 {
         f32::from_le_bytes([b[at], b[at + 1], b[at + 2], b[at + 3]])
