@@ -24,8 +24,10 @@ pub mod extract;
 pub mod io;
 pub mod metrics;
 pub mod normals;
+pub mod pipeline;
 pub mod recon;
 pub mod store;
+pub mod surface;
 pub mod synth;
 pub mod types;
 

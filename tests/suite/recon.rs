@@ -340,7 +340,7 @@ fn twosheets_stay_apart_where_a_global_solve_merges_them() {
     let cube = scanflow::store::Store::open(&store).unwrap().manifest.cube;
     let (pos, nrm) = load_points(&ply);
     // The global solve loses the shell once the gap falls below a voxel (depth 5: 0.44 vox).
-    let g5 = check_mesh(&to_mesh(&scanflow::recon::global_solve(
+    let g5 = check_mesh(&to_mesh(&scanflow::pipeline::global_solve(
         &pos, &nrm, &cube, 5, 1.0,
     )));
     assert_ne!(
@@ -348,7 +348,7 @@ fn twosheets_stay_apart_where_a_global_solve_merges_them() {
         "a global solve at depth 5 should break the shell"
     );
     for depth in [4, 6, 7] {
-        let g = check_mesh(&to_mesh(&scanflow::recon::global_solve(
+        let g = check_mesh(&to_mesh(&scanflow::pipeline::global_solve(
             &pos, &nrm, &cube, depth, 1.0,
         )));
         eprintln!(
@@ -380,7 +380,7 @@ fn two_level_matches_one_global_solve() {
     let cube = scanflow::store::Store::open(&store).unwrap().manifest.cube;
     let (pos, nrm) = load_points(&ply);
     let truth = scanflow::synth::Truth::load(&d.path().join("torus.truth.json")).unwrap();
-    let global = to_mesh(&scanflow::recon::global_solve(&pos, &nrm, &cube, 7, 1.0));
+    let global = to_mesh(&scanflow::pipeline::global_solve(&pos, &nrm, &cube, 7, 1.0));
     let out = d.path().join("t_mesh.ply");
     recon(&store, &out, &["--depth", "7", "--error", "0"]);
     let ours = read_mesh(&out).unwrap();
