@@ -3,7 +3,7 @@
 //! reads the store, hands each stage the slices it works on, and owns the work directory,
 //! resume, the waves and the writer.
 //!
-//! - [`reconstruct`]: a store to a mesh: plan, coarse pass, leaf pass ([`recon`](crate::recon)),
+//! - [`reconstruct()`]: a store to a mesh: plan, coarse pass, leaf pass ([`recon`](crate::recon)),
 //!   then the tiles (`tiles`: blend and extract, fit and colour ([`surface`](crate::surface)),
 //!   weld and write).
 //! - [`global_solve`]: the single-solve reference the tests measure the two-level scheme

@@ -1,7 +1,7 @@
 //! `reconstruct`: a store's points to a PLY mesh (ARCHITECTURE.md steps 3 to 5), in phases:
 //! plan the grids and prepare the work directory; splat every point and solve the coarse
 //! grid; solve the leaves in Morton-order waves, checkpointed; extract the tiles in
-//! Morton-order waves ([`super::tiles`]), welded and streamed to the writer.
+//! Morton-order waves (`pipeline::tiles`), welded and streamed to the writer.
 
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
@@ -21,7 +21,7 @@ use crate::extract::field::unit_for;
 use crate::recon::checkpoint::{leaf_path, read_leaf, write_leaf};
 use crate::recon::{
     CoarseField, DEFAULT_ERROR, DEFAULT_MIN_POINTS, LeafRule, LeafSolvers, Moments, Plan,
-    fft_solve, refine_leaf,
+    fft_solve, refine_leaf, solve_coarse,
 };
 use crate::store::Store;
 use crate::surface::Support;
@@ -245,10 +245,7 @@ fn coarse_pass(store: &Store, plan: &Plan, ctx: &Ctx) -> Result<CoarsePass> {
     stage.finish(None);
     moments.check_not_flat(&store.dir)?;
     let stage = ctx.progress.stage("coarse", None, "solves");
-    let values = ctx
-        .pool
-        .install(|| fft_solve::solve_splatted(&cgrid, v, plan.sigma_vox));
-    let field = CoarseField::new(plan, values);
+    let field = ctx.pool.install(|| solve_coarse(plan, v));
     stage.finish(None);
     Ok(CoarsePass {
         field,

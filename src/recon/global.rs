@@ -25,7 +25,7 @@ pub struct GlobalField {
 }
 
 /// Solve the points `pos` with normals `nrm` on one periodic grid of `2^depth` voxels across
-/// `cube`, padded by [`global_pad`].
+/// `cube`, padded by an eighth of the cube (at least 2 voxels) on each side.
 pub fn global_field(
     pos: &[[f64; 3]],
     nrm: &[[f32; 3]],

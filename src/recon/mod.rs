@@ -94,3 +94,13 @@ pub fn refine_leaf(
         coarse_only(pts, coarse)
     }
 }
+
+/// Step 1's solve: the coarse global solution from the normals splatted on `plan`'s coarse
+/// grid ([`fft_solve::splat`]), smoothed by `plan.sigma_vox` coarse voxels.
+pub fn solve_coarse(plan: &Plan, splatted: Vec<[f32; 3]>) -> CoarseField {
+    let grid = plan.coarse_grid();
+    CoarseField::new(
+        plan,
+        fft_solve::solve_splatted(&grid, splatted, plan.sigma_vox),
+    )
+}
