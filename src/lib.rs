@@ -27,6 +27,7 @@ pub mod normals;
 pub mod pipeline;
 pub mod recon;
 pub mod store;
+pub mod surface;
 pub mod synth;
 pub mod types;
 

@@ -377,7 +377,7 @@ fn run(cli: Cli) -> Result<()> {
                 s.push(".work");
                 PathBuf::from(s)
             });
-            let mut params = scanflow::recon::ReconParams::new(depth, work);
+            let mut params = scanflow::pipeline::ReconParams::new(depth, work);
             params.tile_voxels = tile;
             params.resume = resume;
             params.error = error;
@@ -460,7 +460,7 @@ fn run(cli: Cli) -> Result<()> {
                 rep.points,
                 rep.secs
             );
-            let params = scanflow::recon::ReconParams::new(9, work);
+            let params = scanflow::pipeline::ReconParams::new(9, work);
             let normal = NormalOpts {
                 normals: "auto".into(),
                 neighbours: scanflow::normals::DEFAULT_K,
@@ -532,10 +532,10 @@ fn reconstruct(
     inputs: &[PathBuf],
     conf: Option<&Path>,
     output: &Path,
-    params: scanflow::recon::ReconParams,
+    params: scanflow::pipeline::ReconParams,
     keep_work: bool,
     normal: &NormalOpts,
-) -> Result<scanflow::recon::ReconStats> {
+) -> Result<scanflow::pipeline::ReconStats> {
     let work = params.work_dir.clone();
     let resume = params.resume;
     // One directory argument is a store; anything else is ingested into the work dir.
@@ -559,7 +559,7 @@ fn reconstruct(
         normal.params(),
         ctx,
     )?;
-    let st = scanflow::recon::reconstruct(&store, output, &params, ctx)?;
+    let st = scanflow::pipeline::reconstruct(&store, output, &params, ctx)?;
     if !keep_work {
         std::fs::remove_dir_all(&work)
             .with_context(|| format!("{}: cannot remove the work directory", work.display()))?;

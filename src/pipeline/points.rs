@@ -1,0 +1,309 @@
+//! The input points as the reconstruction reads them: store cells decoded and sorted by leaf
+//! cell, through one byte-bounded cache, handed to the leaf solves ([`LeafPoints`]) and to the
+//! vertex fit ([`NearPoints`]).
+
+use std::collections::{HashMap, HashSet};
+use std::sync::Arc;
+
+use rayon::prelude::*;
+
+use crate::error::Result;
+use crate::exec::cache::Lru;
+use crate::recon::{LeafPoints, Plan};
+use crate::store::Store;
+use crate::surface::NearPoints;
+use crate::types::{Aabb, CellKey, Cube, PointBatch};
+
+/// Bytes a sorted point holds: position f64×3 (24) and normal f32×3 (12).
+pub const SORTED_POINT_BYTES: u64 = 36;
+/// Bytes a sorted point's colour holds: RGBA u16×4.
+const SORTED_COLOUR_BYTES: u64 = 8;
+/// Bytes a sorted point's intensity holds: f32.
+const SORTED_INTENSITY_BYTES: u64 = 4;
+/// Bytes of a leaf range of a sorted cell: key u64 and two usize bounds.
+const SORTED_RANGE_BYTES: u64 = 24;
+/// Times [`PointSource::near_points`] doubles its margin while it finds no point.
+const NEAR_POINTS_WIDENINGS: usize = 6;
+/// A leaf solves the points of its cell scaled by 1.8 about its centre: 0.4 of the edge beyond
+/// each face.
+const LEAF_REACH: f64 = 0.4;
+
+/// A store cell's points sorted by leaf cell.
+struct SortedCell {
+    pos: Vec<[f64; 3]>,
+    nrm: Vec<[f32; 3]>,
+    col: Vec<[u16; 4]>,
+    inten: Vec<f32>,
+    ranges: Vec<(CellKey, usize, usize)>,
+}
+
+impl SortedCell {
+    fn new(b: PointBatch, cube: &Cube, leaf_level: u32) -> SortedCell {
+        let keys: Vec<CellKey> = b
+            .pos
+            .iter()
+            .map(|p| CellKey::new(leaf_level, cube.cell_coords(*p, leaf_level)))
+            .collect();
+        let mut order: Vec<u32> = (0..b.len() as u32).collect();
+        order.sort_by_key(|&i| (keys[i as usize], i));
+        let pos: Vec<[f64; 3]> = order.iter().map(|&i| b.pos[i as usize]).collect();
+        let nrm: Vec<[f32; 3]> = order.iter().map(|&i| b.normal[i as usize]).collect();
+        let col: Vec<[u16; 4]> = if b.color.is_empty() {
+            Vec::new()
+        } else {
+            order.iter().map(|&i| b.color[i as usize]).collect()
+        };
+        let inten: Vec<f32> = if b.intensity.is_empty() {
+            Vec::new()
+        } else {
+            order.iter().map(|&i| b.intensity[i as usize]).collect()
+        };
+        let mut ranges = Vec::new();
+        let mut s = 0;
+        for (j, &i) in order.iter().enumerate() {
+            let k = keys[i as usize];
+            if j + 1 == order.len() || keys[order[j + 1] as usize] != k {
+                ranges.push((k, s, j + 1));
+                s = j + 1;
+            }
+        }
+        SortedCell {
+            pos,
+            nrm,
+            col,
+            inten,
+            ranges,
+        }
+    }
+
+    fn bytes(&self) -> u64 {
+        self.pos.len() as u64 * SORTED_POINT_BYTES
+            + self.col.len() as u64 * SORTED_COLOUR_BYTES
+            + self.inten.len() as u64 * SORTED_INTENSITY_BYTES
+            + self.ranges.len() as u64 * SORTED_RANGE_BYTES
+    }
+
+    fn range(&self, k: CellKey) -> (usize, usize) {
+        match self.ranges.binary_search_by_key(&k, |r| r.0) {
+            Ok(i) => (self.ranges[i].1, self.ranges[i].2),
+            Err(_) => (0, 0),
+        }
+    }
+}
+
+/// Points of the store by leaf cell, through a cache of decoded store cells bounded in bytes.
+pub struct PointSource<'a> {
+    store: &'a Store,
+    plan: Plan,
+    by_key: HashMap<CellKey, usize>,
+    deeper: HashMap<CellKey, Vec<usize>>,
+    cache: Lru<usize, Arc<SortedCell>>,
+    cap: u64,
+}
+
+impl<'a> PointSource<'a> {
+    /// The points of `store` by `plan`'s leaf cells, caching up to `cap` bytes of sorted cells.
+    pub fn new(store: &'a Store, plan: Plan, cap: u64) -> PointSource<'a> {
+        let mut by_key = HashMap::new();
+        let mut deeper: HashMap<CellKey, Vec<usize>> = HashMap::new();
+        for (i, c) in store.manifest.cells.iter().enumerate() {
+            if c.level > plan.leaf_level {
+                let mut k = c.key;
+                while k.level() > plan.leaf_level {
+                    k = k.parent();
+                }
+                deeper.entry(k).or_default().push(i);
+            } else {
+                by_key.insert(c.key, i);
+            }
+        }
+        PointSource {
+            store,
+            plan,
+            by_key,
+            deeper,
+            cache: Lru::new(cap),
+            cap,
+        }
+    }
+
+    fn covering(&self, k: CellKey) -> Vec<usize> {
+        if let Some(v) = self.deeper.get(&k) {
+            return v.clone();
+        }
+        let mut a = k;
+        loop {
+            if let Some(&i) = self.by_key.get(&a) {
+                return vec![i];
+            }
+            if a == CellKey::ROOT {
+                return Vec::new();
+            }
+            a = a.parent();
+        }
+    }
+
+    fn cell(&mut self, i: usize) -> Result<Arc<SortedCell>> {
+        if let Some(c) = self.cache.get(&i) {
+            return Ok(Arc::clone(c));
+        }
+        let c = Arc::new(self.load(i)?);
+        self.insert(i, Arc::clone(&c));
+        Ok(c)
+    }
+
+    fn load(&self, i: usize) -> Result<SortedCell> {
+        let b = self.store.read_cell(i)?;
+        Ok(SortedCell::new(b, &self.plan.cube, self.plan.leaf_level))
+    }
+
+    fn insert(&mut self, i: usize, c: Arc<SortedCell>) {
+        let bytes = c.bytes();
+        self.cache.insert(i, c, bytes);
+    }
+
+    /// Read and sort the store cells `wanted` that are not cached yet, in parallel on `pool`
+    /// (decompression is most of a cell's cost), as many as half the cache holds; the rest
+    /// are read when asked for. Only speed depends on this, never the points returned.
+    pub fn preload(&mut self, wanted: &[usize], pool: &rayon::ThreadPool) -> Result<()> {
+        let mut seen = HashSet::new();
+        let mut missing = Vec::new();
+        let mut est = 0u64;
+        for &i in wanted {
+            if self.cache.contains(&i) || !seen.insert(i) {
+                continue;
+            }
+            // SortedCell::bytes of the cell's points, without colours.
+            est += self.store.manifest.cells[i].count * SORTED_POINT_BYTES;
+            if est > self.cap / 2 {
+                break;
+            }
+            missing.push(i);
+        }
+        let loaded: Vec<Result<SortedCell>> =
+            pool.install(|| missing.par_iter().map(|&i| self.load(i)).collect());
+        for (i, c) in missing.into_iter().zip(loaded) {
+            self.insert(i, Arc::new(c?));
+        }
+        Ok(())
+    }
+
+    /// The leaf-level cells meeting box `bx` (world), z slowest.
+    fn keys_in(&self, bx: &Aabb) -> Vec<CellKey> {
+        let lvl = self.plan.leaf_level;
+        let side = 1i64 << lvl;
+        let ca = self.plan.cube.cell_coords(bx.min, lvl).map(|v| v as i64);
+        let cb = self.plan.cube.cell_coords(bx.max, lvl).map(|v| v as i64);
+        let mut out = Vec::new();
+        for z in ca[2].max(0)..=cb[2].min(side - 1) {
+            for y in ca[1].max(0)..=cb[1].min(side - 1) {
+                for x in ca[0].max(0)..=cb[0].min(side - 1) {
+                    out.push(CellKey::new(lvl, [x as u32, y as u32, z as u32]));
+                }
+            }
+        }
+        out
+    }
+
+    /// Leaf `key` and its neighbours sharing a face, edge or corner, within the cube, z
+    /// slowest.
+    fn neighbours(key: CellKey) -> Vec<CellKey> {
+        let (l, c) = key.decode();
+        let side = 1i64 << l;
+        let mut out = Vec::with_capacity(27);
+        for dz in -1i64..=1 {
+            for dy in -1i64..=1 {
+                for dx in -1i64..=1 {
+                    let q = [c[0] as i64 + dx, c[1] as i64 + dy, c[2] as i64 + dz];
+                    if q.iter().all(|&v| v >= 0 && v < side) {
+                        out.push(CellKey::new(l, q.map(|v| v as u32)));
+                    }
+                }
+            }
+        }
+        out
+    }
+
+    /// Call `f(cell, j)` for each point `j` of leaf-level cell `k` that lies in `bx`, in the
+    /// store's order.
+    fn visit(
+        &mut self,
+        k: CellKey,
+        bx: &Aabb,
+        mut f: impl FnMut(&SortedCell, usize),
+    ) -> Result<()> {
+        for si in self.covering(k) {
+            let sc = self.cell(si)?;
+            let (s, e) = sc.range(k);
+            for j in s..e {
+                if bx.contains(sc.pos[j]) {
+                    f(&sc, j);
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The store cells [`PointSource::near_points`] reads first for the box `lo..hi` and
+    /// `margin`.
+    pub fn cells_near(&self, lo: [f64; 3], hi: [f64; 3], margin: f64) -> Vec<usize> {
+        let bx = Aabb { min: lo, max: hi }.grown(margin);
+        self.keys_in(&bx)
+            .into_iter()
+            .flat_map(|k| self.covering(k))
+            .collect()
+    }
+
+    /// The store cells [`PointSource::gather`] reads for leaf `key`.
+    pub fn cells_for_leaf(&self, key: CellKey) -> Vec<usize> {
+        Self::neighbours(key)
+            .into_iter()
+            .flat_map(|k| self.covering(k))
+            .collect()
+    }
+
+    /// The points (with their colours, when the store has them) within `margin` of the box
+    /// `lo..hi` (world), widening the margin (doubling, up to 6 times) while none is found.
+    pub fn near_points(&mut self, lo: [f64; 3], hi: [f64; 3], margin: f64) -> Result<NearPoints> {
+        let mut out = NearPoints::default();
+        let mut m = margin;
+        for _ in 0..=NEAR_POINTS_WIDENINGS {
+            let bx = Aabb { min: lo, max: hi }.grown(m);
+            for k in self.keys_in(&bx) {
+                self.visit(k, &bx, |sc, j| {
+                    out.pos.push(sc.pos[j]);
+                    let c = sc.col.get(j).copied().unwrap_or([0; 4]);
+                    out.col.push([c[0], c[1], c[2]]);
+                    out.inten.push(sc.inten.get(j).copied().unwrap_or(0.0));
+                })?;
+            }
+            out.lo = bx.min;
+            out.hi = bx.max;
+            if !out.pos.is_empty() {
+                break;
+            }
+            m *= 2.0;
+        }
+        Ok(out)
+    }
+
+    /// The points of leaf `key`'s 1.8× box, and how many of them (the first ones) lie in the
+    /// cell itself.
+    pub fn gather(&mut self, key: CellKey) -> Result<LeafPoints> {
+        let cell_box = self.plan.cube.cell_box(key);
+        let reach = cell_box.grown(LEAF_REACH * (cell_box.max[0] - cell_box.min[0]));
+        let mut own = LeafPoints::default();
+        let mut rest = LeafPoints::default();
+        for nk in Self::neighbours(key) {
+            let dst = if nk == key { &mut own } else { &mut rest };
+            self.visit(nk, &reach, |sc, j| {
+                dst.pos.push(sc.pos[j]);
+                dst.nrm.push(sc.nrm[j]);
+            })?;
+        }
+        own.own = own.pos.len();
+        own.pos.extend(rest.pos);
+        own.nrm.extend(rest.nrm);
+        Ok(own)
+    }
+}

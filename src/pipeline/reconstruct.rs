@@ -1,0 +1,368 @@
+//! `reconstruct`: a store's points to a PLY mesh (ARCHITECTURE.md steps 3 to 5), in phases:
+//! plan the grids and prepare the work directory; splat every point and solve the coarse
+//! grid; solve the leaves in Morton-order waves, checkpointed; extract the tiles in
+//! Morton-order waves (`pipeline::tiles`), welded and streamed to the writer.
+
+use std::collections::BTreeSet;
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+use std::time::Instant;
+
+use rayon::prelude::*;
+use serde::Serialize;
+
+use super::points::{PointSource, SORTED_POINT_BYTES};
+use super::tiles::{self, TileJob};
+use super::workdir::{self, WorkDir};
+use crate::error::{Error, Result};
+use crate::exec::Ctx;
+use crate::exec::budget::{Permit, Share};
+use crate::recon::checkpoint::{leaf_path, read_leaf, write_leaf};
+use crate::recon::pou::unit_for;
+use crate::recon::{
+    CoarseField, DEFAULT_ERROR, DEFAULT_MIN_POINTS, LeafRule, LeafSolvers, Moments, Plan,
+    fft_solve, refine_leaf, solve_coarse,
+};
+use crate::store::Store;
+use crate::surface::Support;
+use crate::types::{CellKey, PointBatch};
+
+/// Bytes a decoded store point holds while the coarse pass splats it: position f64×3 (24),
+/// normal f32×3 (12), colour u16×4 (8), intensity f32 (4), confidence f32 (4).
+const BATCH_POINT_BYTES: u64 = 52;
+
+/// The most the cache of sorted store cells holds, whatever the budget: leaves in Morton order
+/// need only the store cells around them.
+const POINT_CACHE_MAX_BYTES: u64 = 128 << 20;
+
+/// The fewest points a solve accepts.
+const MIN_POINTS: u64 = 16;
+
+/// Options of `reconstruct`.
+#[derive(Debug, Clone)]
+pub struct ReconParams {
+    /// Octree depth: `2^depth` cells per edge of the cube (as PoissonRecon's `--depth`).
+    pub depth: u32,
+    /// Gaussian smoothing width, in voxels of each grid.
+    pub sigma_vox: f64,
+    /// Tile edge in fine voxels (`None`: 64, at least one leaf, at most the cube).
+    pub tile_voxels: Option<u64>,
+    /// Work directory (leaf checkpoints, run description).
+    pub work_dir: PathBuf,
+    /// Reuse the leaves a previous run with the same inputs and options left in `work_dir`.
+    pub resume: bool,
+    /// Error tolerance relative to the bounding-box diagonal: a leaf whose samples lie
+    /// within this mean distance of the coarse solution's surface is not refined.
+    pub error: f64,
+    /// Leaves with fewer points in their cell are not refined.
+    pub min_points: u64,
+    /// Leave the surface open where no input point is within two coarse voxels.
+    pub trim: bool,
+    /// Tile fields and marching cubes on the GPU: auto (a real GPU when there is one), on,
+    /// off (the default: the GPU path is not yet measured faster end to end, see
+    /// `extract::gpu`).
+    pub gpu: crate::extract::gpu::GpuMode,
+    /// Move each vertex onto the plane of its nearest input points (see
+    /// [`crate::surface::FIT_NEIGHBOURS`]).
+    pub fit: bool,
+}
+
+impl ReconParams {
+    /// Defaults for `depth` with work directory `work_dir`.
+    pub fn new(depth: u32, work_dir: PathBuf) -> ReconParams {
+        ReconParams {
+            depth,
+            sigma_vox: 1.0,
+            fit: true,
+            tile_voxels: None,
+            work_dir,
+            resume: false,
+            error: DEFAULT_ERROR,
+            min_points: DEFAULT_MIN_POINTS,
+            trim: false,
+            gpu: crate::extract::gpu::GpuMode::Off,
+        }
+    }
+}
+
+/// What `reconstruct` did.
+#[derive(Debug, Clone, Serialize)]
+pub struct ReconStats {
+    /// Output vertices.
+    pub vertices: u64,
+    /// Output triangles.
+    pub faces: u64,
+    /// Occupied leaves (solved or reused).
+    pub leaves: usize,
+    /// Leaves refined by a fine solve (the others were within `--error` of the coarse solve).
+    pub leaves_refined: usize,
+    /// Leaves reused from the work directory.
+    pub leaves_reused: usize,
+    /// Tiles extracted (tiles with no surface are skipped).
+    pub tiles: usize,
+    /// Iso-value.
+    pub iso: f64,
+    /// Leaf edge in fine voxels.
+    pub leaf_voxels: u64,
+    /// Fine voxels per coarse voxel.
+    pub coarse_ratio: u64,
+    /// Tile edge in fine voxels.
+    pub tile_voxels: u64,
+    /// Most vertices held in the welder's frontier at once.
+    pub peak_frontier: usize,
+    /// Wall time in seconds.
+    pub secs: f64,
+}
+
+/// Reconstruct the surface of the points in `store` into the PLY mesh `out`.
+pub fn reconstruct(
+    store: &Store,
+    out: &Path,
+    params: &ReconParams,
+    ctx: &Ctx,
+) -> Result<ReconStats> {
+    let t0 = Instant::now();
+    let plan = plan_run(store, params, ctx)?;
+    let dirs = workdir::prepare(store, &plan, params)?;
+    let mut coarse = coarse_pass(store, &plan, ctx)?;
+    let point_cap = ctx
+        .budget
+        .share(Share::PointCache)
+        .min(POINT_CACHE_MAX_BYTES);
+    let mut src = PointSource::new(store, plan, point_cap);
+    let _cache_permit = ctx.budget.acquire(point_cap, "the store cell cache")?;
+    let leaves = leaf_pass(store, &plan, params, &mut coarse, &dirs, &mut src, ctx)?;
+    let m = &store.manifest;
+    let (with_color, with_intensity) = (m.attributes.color, m.attributes.intensity);
+    let points = (with_color || with_intensity || params.fit).then(|| Mutex::new(src));
+    let job = TileJob {
+        plan: &plan,
+        params,
+        coarse: &coarse.field,
+        support: &coarse.support,
+        refined: &leaves.refined,
+        iso: leaves.iso,
+        unit: leaves.unit,
+        leaves_dir: &dirs.leaves,
+        tiles_dir: &dirs.tiles,
+        with_color,
+        with_intensity,
+    };
+    let ts = tiles::run(&job, points, out, ctx)?;
+    Ok(ReconStats {
+        vertices: ts.vertices,
+        faces: ts.faces,
+        leaves: leaves.all.len(),
+        leaves_refined: leaves.refined.len(),
+        leaves_reused: leaves.reused,
+        tiles: ts.tiles,
+        iso: leaves.iso,
+        leaf_voxels: plan.leaf_voxels,
+        coarse_ratio: plan.coarse_ratio,
+        tile_voxels: plan.tile,
+        peak_frontier: ts.peak_frontier,
+        secs: t0.elapsed().as_secs_f64(),
+    })
+}
+
+/// Check that `store` can be reconstructed and choose the grids.
+fn plan_run(store: &Store, params: &ReconParams, ctx: &Ctx) -> Result<Plan> {
+    let m = &store.manifest;
+    if !m.attributes.normal {
+        return Err(Error::input(
+            &store.dir,
+            "the store's points have no normals (nx ny nz), which reconstruction requires: ingest it again with --normals auto or estimate, or reconstruct from the point files (normals are then estimated)",
+        ));
+    }
+    if m.point_count < MIN_POINTS {
+        return Err(Error::input(
+            &store.dir,
+            format!(
+                "only {} points: a solve needs at least {MIN_POINTS}",
+                m.point_count
+            ),
+        ));
+    }
+    Plan::new(
+        m.cube,
+        params.depth,
+        params.sigma_vox,
+        params.tile_voxels,
+        ctx.budget.share(Share::CoarseGrid),
+    )
+}
+
+/// What the coarse pass leaves: the coarse solution (its permit held while it lives), the
+/// occupied leaf cells, and which coarse voxels hold points.
+struct CoarsePass {
+    field: CoarseField,
+    _permit: Permit,
+    occupied: BTreeSet<CellKey>,
+    support: Support,
+}
+
+/// Pass 1: splat every point into the coarse grid; collect occupied leaf cells, the coarse
+/// voxels holding points, and the moments that refuse planar and linear inputs; solve.
+fn coarse_pass(store: &Store, plan: &Plan, ctx: &Ctx) -> Result<CoarsePass> {
+    let m = &store.manifest;
+    let cgrid = plan.coarse_grid();
+    let permit = ctx
+        .budget
+        .acquire(cgrid.scratch_bytes(), "the coarse global solve")?;
+    let stage = ctx.progress.stage("splat", Some(m.point_count), "points");
+    let mut v = vec![[0f32; 3]; cgrid.len()];
+    let mut occupied = BTreeSet::new();
+    let mut support = Support::new(plan.cube.origin, plan.coarse_spacing(), plan.coarse_cells());
+    let mut moments = Moments::new(m.bounds.min);
+    let wave = 2 * ctx.threads();
+    let ncells = m.cells.len();
+    let mut i = 0;
+    while i < ncells {
+        let ids: Vec<usize> = (i..(i + wave).min(ncells)).collect();
+        let bytes: u64 = ids
+            .iter()
+            .map(|&j| m.cells[j].count * BATCH_POINT_BYTES)
+            .sum();
+        let _permit = ctx.budget.acquire(bytes, "a wave of store cells")?;
+        let batches: Vec<Result<PointBatch>> = ctx
+            .pool
+            .install(|| ids.par_iter().map(|&j| store.read_cell(j)).collect());
+        for b in batches {
+            let b = b?;
+            fft_solve::splat(&cgrid, &b.pos, &b.normal, &mut v);
+            for p in &b.pos {
+                support.mark(*p);
+                occupied.insert(CellKey::new(
+                    plan.leaf_level,
+                    plan.cube.cell_coords(*p, plan.leaf_level),
+                ));
+                moments.add(*p);
+            }
+            stage.inc(b.len() as u64);
+        }
+        i += wave;
+    }
+    stage.finish(None);
+    moments.check_not_flat(&store.dir)?;
+    let stage = ctx.progress.stage("coarse", None, "solves");
+    let field = ctx.pool.install(|| solve_coarse(plan, v));
+    stage.finish(None);
+    Ok(CoarsePass {
+        field,
+        _permit: permit,
+        occupied,
+        support,
+    })
+}
+
+/// What the leaf pass leaves: every occupied leaf, the refined ones, how many were reused, the
+/// iso-value and the blend's fixed-point unit.
+struct LeafPass {
+    all: Vec<CellKey>,
+    refined: BTreeSet<CellKey>,
+    reused: usize,
+    iso: f64,
+    unit: f32,
+}
+
+/// One leaf's result: its iso sum and count, whether it was read back, whether it is refined.
+type LeafOutcome = (f64, u64, bool, bool);
+
+/// Pass 2: the occupied leaves of the coarse pass (taken from it), in Morton order, solved
+/// in parallel waves, spilled to the work directory. Leaves a resumed run checkpointed
+/// already are read back.
+fn leaf_pass(
+    store: &Store,
+    plan: &Plan,
+    params: &ReconParams,
+    coarse: &mut CoarsePass,
+    dirs: &WorkDir,
+    src: &mut PointSource,
+    ctx: &Ctx,
+) -> Result<LeafPass> {
+    let leaves: Vec<CellKey> = std::mem::take(&mut coarse.occupied).into_iter().collect();
+    let coarse = &coarse.field;
+    let fine_bytes = plan.leaf_scratch_bytes();
+    let stage = ctx
+        .progress
+        .stage("leaves", Some(leaves.len() as u64), "leaves");
+    let (mut iso_sum, mut iso_count, mut reused) = (0.0, 0u64, 0);
+    let mut refined = BTreeSet::new();
+    let rule = LeafRule {
+        tolerance: params.error * store.manifest.bounds.diagonal(),
+        min_points: params.min_points,
+    };
+    let dm = plan.detail_n();
+    let solvers = LeafSolvers::new(plan);
+    // Fixed point for the blend (`extract::field`): the coarse values within 2^21 units;
+    // leaf details are stored in it.
+    let unit = unit_for(coarse.max_abs());
+    let wave = 2 * ctx.threads();
+    for wave_keys in leaves.chunks(wave) {
+        let done: Vec<bool> = wave_keys
+            .iter()
+            .map(|&k| params.resume && leaf_path(&dirs.leaves, k).exists())
+            .collect();
+        let wanted: Vec<usize> = wave_keys
+            .iter()
+            .zip(&done)
+            .filter(|(_, done)| !**done)
+            .flat_map(|(&k, _)| src.cells_for_leaf(k))
+            .collect();
+        src.preload(&wanted, &ctx.pool)?;
+        let mut todo = Vec::new();
+        for (&k, &done) in wave_keys.iter().zip(&done) {
+            todo.push((k, if done { None } else { Some(src.gather(k)?) }));
+        }
+        let pts_bytes: u64 = todo
+            .iter()
+            .map(|(_, p)| {
+                p.as_ref()
+                    .map_or(0, |p| p.pos.len() as u64 * SORTED_POINT_BYTES)
+            })
+            .sum();
+        let _permit = ctx.budget.acquire(
+            // At most one solve a worker runs at once.
+            fine_bytes * todo.len().min(ctx.threads()) as u64 + pts_bytes,
+            "a wave of leaf solves",
+        )?;
+        let res: Vec<Result<LeafOutcome>> = ctx.pool.install(|| {
+            todo.par_iter()
+                .map(|(k, pts)| match pts {
+                    None => {
+                        let d = read_leaf(&dirs.leaves, *k, dm)?;
+                        Ok((d.iso_sum, d.iso_count, true, d.detail.is_some()))
+                    }
+                    Some(p) => {
+                        let d = refine_leaf(plan, unit, &solvers, *k, p, coarse, &rule);
+                        write_leaf(&dirs.leaves, *k, &d)?;
+                        Ok((d.iso_sum, d.iso_count, false, d.detail.is_some()))
+                    }
+                })
+                .collect()
+        });
+        for (r, k) in res.into_iter().zip(wave_keys) {
+            let (s, c, was_reused, is_refined) = r?;
+            iso_sum += s;
+            iso_count += c;
+            reused += was_reused as usize;
+            if is_refined {
+                refined.insert(*k);
+            }
+        }
+        stage.inc(wave_keys.len() as u64);
+    }
+    stage.finish(None);
+    let iso = if iso_count > 0 {
+        iso_sum / iso_count as f64
+    } else {
+        0.0
+    };
+    Ok(LeafPass {
+        all: leaves,
+        refined,
+        reused,
+        iso,
+        unit,
+    })
+}

@@ -1,0 +1,480 @@
+//! The tiles phase of `reconstruct` (ARCHITECTURE.md steps 4 and 5): tiles in Morton order, in
+//! waves, each blended from the coarse solution and the leaf details, extracted on the CPU or
+//! the GPU, fitted to the input points and coloured, trimmed, checkpointed, then welded and
+//! streamed to the writer in Morton order.
+
+use std::collections::BTreeSet;
+use std::path::Path;
+use std::sync::{Arc, Mutex};
+
+use rayon::prelude::*;
+
+use super::details::DetailCache;
+use super::points::PointSource;
+use super::reconstruct::ReconParams;
+use crate::error::{Error, Result};
+use crate::exec::Ctx;
+use crate::exec::budget::Share;
+use crate::extract::cpu::McWorkspace;
+use crate::extract::field::BlendEval;
+use crate::extract::gpu::GpuExtractor;
+use crate::extract::weld::Welder;
+use crate::io::mesh_write::MeshPlyWriter;
+use crate::recon::checkpoint::{read_tile, tile_path, write_tile};
+use crate::recon::{CoarseField, Plan, leaves_near, pou, tile_blend};
+use crate::surface::{NearPoints, Support, trim_mesh};
+use crate::types::{CellKey, Detail, EdgeKey, GridGeom, TileMesh, demorton3, morton3};
+
+/// Bytes a tile node holds while its field is built: the blend's i64 accumulator (8) and the
+/// f32 field (4).
+const TILE_NODE_BYTES: u64 = 12;
+
+/// The margin around a tile whose input points its fit and colours read, in leaf edges.
+const NEAR_MARGIN_LEAVES: f64 = 0.25;
+
+/// Tiles a wave may send to the GPU thread ahead of the pool finishing them.
+const GPU_QUEUE: usize = 2;
+
+/// What the tiles phase reads: the plan, the options, the solution and its checkpoints.
+pub struct TileJob<'a> {
+    /// The grids.
+    pub plan: &'a Plan,
+    /// The options.
+    pub params: &'a ReconParams,
+    /// The coarse solution.
+    pub coarse: &'a CoarseField,
+    /// Which coarse voxels hold input points (for `--trim`).
+    pub support: &'a Support,
+    /// The refined leaves (those with a detail).
+    pub refined: &'a BTreeSet<CellKey>,
+    /// Iso-value.
+    pub iso: f64,
+    /// Fixed-point unit of the blend.
+    pub unit: f32,
+    /// Leaf checkpoints.
+    pub leaves_dir: &'a Path,
+    /// Tile checkpoints.
+    pub tiles_dir: &'a Path,
+    /// Whether the output carries colours.
+    pub with_color: bool,
+    /// Whether the output carries intensities.
+    pub with_intensity: bool,
+}
+
+/// What the tiles phase did.
+#[derive(Debug, Clone, Copy)]
+pub struct TileStats {
+    /// Output vertices.
+    pub vertices: u64,
+    /// Output triangles.
+    pub faces: u64,
+    /// Tiles extracted (or read back).
+    pub tiles: usize,
+    /// Most vertices held in the welder's frontier at once.
+    pub peak_frontier: usize,
+}
+
+/// A tile of a wave: its Morton index, lowest fine node and the refined leaves that reach it.
+type WaveTile = (u64, [i64; 3], Vec<CellKey>);
+
+/// A tile ready to extract: its Morton index, lowest fine node and leaf details (none: read
+/// back from its checkpoint).
+type LoadedTile = (u64, [i64; 3], Option<Vec<(CellKey, Arc<Detail>)>>);
+
+/// The point source the fit and colours read, shared by the workers.
+type SharedPoints<'a> = Option<Mutex<PointSource<'a>>>;
+
+/// Extract, fit, weld and write every tile of `job` into the PLY mesh `out`. `points` is the
+/// input points when the fit or colours need them.
+pub fn run(job: &TileJob, points: SharedPoints, out: &Path, ctx: &Ctx) -> Result<TileStats> {
+    let plan = job.plan;
+    let ntiles_axis = plan.fine_cells / plan.tile;
+    let tiles_total = ntiles_axis.pow(3);
+    let geom = GridGeom {
+        origin: plan.cube.origin,
+        h: plan.spacing,
+        n: plan.fine_cells,
+    };
+    let mut gpu = GpuExtractor::new(job.params.gpu)?;
+    if let Some(g) = &gpu {
+        log::info!("extracting tiles on the GPU: {}", g.adapter_name());
+    }
+    // Both welder callbacks write to the one writer.
+    let writer = std::cell::RefCell::new(MeshPlyWriter::create_with(
+        out,
+        job.with_color,
+        job.with_intensity,
+    )?);
+    let mut welder = Welder::new();
+    // Tiles in Morton order reuse the leaves of their neighbours: the cache keeps twice the
+    // leaves of the last wave (the next wave's tiles are its neighbours), within its share of
+    // the budget.
+    let detail_cap = ctx.budget.share(Share::DetailCache);
+    let mut gpu_totals = GpuTotals::default();
+    let mut details = DetailCache::new(job.leaves_dir, plan.detail_n(), detail_cap);
+    let _detail_permit = ctx.budget.acquire(detail_cap, "the leaf detail cache")?;
+    let stage = ctx.progress.stage("tiles", Some(tiles_total), "tiles");
+    let wave = 2 * ctx.threads();
+    let mut tiles_done = 0usize;
+    let mut t = 0u64;
+    let last_tile = |key: EdgeKey| -> u64 {
+        let (node, _axis) = geom.decode_edge(key);
+        let c = node.map(|v| (v / plan.tile).min(ntiles_axis - 1) as u32);
+        morton3(c)
+    };
+    while t < tiles_total {
+        let wave_tiles = next_wave(job, &mut t, tiles_total, wave);
+        details.fit(2 * wave_tiles.iter().map(|w| w.2.len()).sum::<usize>());
+        let (loaded, near_pts) = load_wave(job, &wave_tiles, &points, &mut details, ctx)?;
+        let _permit = ctx.budget.acquire(
+            loaded.len() as u64 * (plan.tile + 1).pow(3) * TILE_NODE_BYTES,
+            "a wave of tiles",
+        )?;
+        let meshes = match gpu.as_mut() {
+            Some(g) => {
+                let shared = GpuWave {
+                    job,
+                    points: &points,
+                    loaded: &loaded,
+                    near_pts: &near_pts,
+                    geom: &geom,
+                };
+                extract_gpu(&shared, g, &mut gpu_totals, &ctx.pool)?
+            }
+            None => extract_cpu(job, &points, &loaded, &near_pts, &geom, &ctx.pool),
+        };
+        for m in meshes {
+            let (tt, mesh) = m?;
+            welder.add_tile(
+                tt,
+                &mesh,
+                last_tile,
+                |_, i, p| {
+                    writer.borrow_mut().vertex_with(
+                        p,
+                        mesh.colors.get(i).copied(),
+                        mesh.intensity.get(i).copied(),
+                    )
+                },
+                |tri| writer.borrow_mut().triangle(tri),
+            )?;
+            tiles_done += 1;
+        }
+        stage.inc((t - stage.done()).min(tiles_total));
+    }
+    stage.finish(None);
+    if gpu.is_some() {
+        gpu_totals.log();
+    }
+    let ws = writer.into_inner().finish()?;
+    Ok(TileStats {
+        vertices: ws.vertices,
+        faces: ws.faces,
+        tiles: tiles_done,
+        peak_frontier: welder.peak_frontier(),
+    })
+}
+
+/// The next wave of at most `wave` non-empty tiles from Morton index `*t` on (advanced past
+/// them): a tile is empty when no refined leaf reaches it and the coarse solution does not
+/// cross the iso-value over it.
+fn next_wave(job: &TileJob, t: &mut u64, tiles_total: u64, wave: usize) -> Vec<WaveTile> {
+    let plan = job.plan;
+    let mut wave_tiles = Vec::new();
+    while *t < tiles_total && wave_tiles.len() < wave {
+        let c = demorton3(*t);
+        let lo = c.map(|v| v as i64 * plan.tile as i64);
+        let hi = lo.map(|v| v + plan.tile as i64);
+        let near = leaves_near(plan, job.refined, lo, hi);
+        let (mn, mx) = job.coarse.range(lo, hi);
+        let empty = near.is_empty() && (mn as f64 > job.iso || (mx as f64) < job.iso);
+        if !empty {
+            wave_tiles.push((*t, lo, near));
+        }
+        *t += 1;
+    }
+    wave_tiles
+}
+
+/// The box whose points a tile's fit and colours read: the tile from fine node `lo` and a
+/// margin (lower corner, upper corner, margin).
+fn near_box(plan: &Plan, lo: [i64; 3]) -> ([f64; 3], [f64; 3], f64) {
+    let a = plan.node_pos(lo);
+    let b = plan.node_pos(lo.map(|v| v + plan.tile as i64));
+    (
+        a,
+        b,
+        plan.spacing * plan.leaf_voxels as f64 * NEAR_MARGIN_LEAVES,
+    )
+}
+
+/// Lock the shared point source.
+fn lock<'s, 'a>(
+    src: &'s Mutex<PointSource<'a>>,
+) -> Result<std::sync::MutexGuard<'s, PointSource<'a>>> {
+    src.lock()
+        .map_err(|_| Error::Internal("the point source was poisoned".into()))
+}
+
+/// Read what a wave needs: the leaf details of the tiles to extract and their input points
+/// (read in parallel first: store cells for the fit and colours, details for the blend).
+/// Tiles a resumed run checkpointed already are read back instead.
+fn load_wave(
+    job: &TileJob,
+    wave_tiles: &[WaveTile],
+    points: &SharedPoints,
+    details: &mut DetailCache,
+    ctx: &Ctx,
+) -> Result<(Vec<LoadedTile>, Vec<Option<NearPoints>>)> {
+    let plan = job.plan;
+    let done: Vec<bool> = wave_tiles
+        .iter()
+        .map(|w| job.params.resume && tile_path(job.tiles_dir, w.0).exists())
+        .collect();
+    let todo: Vec<&WaveTile> = wave_tiles
+        .iter()
+        .zip(&done)
+        .filter(|(_, done)| !**done)
+        .map(|(w, _)| w)
+        .collect();
+    if let Some(src) = points.as_ref() {
+        let mut src = lock(src)?;
+        let wanted: Vec<usize> = todo
+            .iter()
+            .flat_map(|(_, lo, _)| {
+                let (a, b, margin) = near_box(plan, *lo);
+                src.cells_near(a, b, margin)
+            })
+            .collect();
+        src.preload(&wanted, &ctx.pool)?;
+    }
+    let keys: Vec<CellKey> = todo.iter().flat_map(|w| w.2.iter().copied()).collect();
+    details.prefetch(&keys, &ctx.pool)?;
+    let mut loaded = Vec::with_capacity(wave_tiles.len());
+    let mut near_pts = Vec::with_capacity(wave_tiles.len());
+    for ((tt, lo, near), &done) in wave_tiles.iter().zip(&done) {
+        if done {
+            loaded.push((*tt, *lo, None));
+            near_pts.push(None);
+            continue;
+        }
+        near_pts.push(match points.as_ref() {
+            Some(src) => {
+                let (a, b, margin) = near_box(plan, *lo);
+                Some(lock(src)?.near_points(a, b, margin)?)
+            }
+            None => None,
+        });
+        let mut ds = Vec::with_capacity(near.len());
+        for k in near {
+            ds.push((*k, details.get(*k)?));
+        }
+        loaded.push((*tt, *lo, Some(ds)));
+    }
+    Ok((loaded, near_pts))
+}
+
+/// The pool's share of a tile after extraction: trim, fit and colours from its input points
+/// `cp`, checkpoint. Returns the tile's Morton index `tt` and mesh.
+fn finish_tile(
+    job: &TileJob,
+    points: &SharedPoints,
+    tt: u64,
+    mut mesh: TileMesh,
+    cp: &Option<NearPoints>,
+) -> Result<(u64, TileMesh)> {
+    if job.params.trim {
+        trim_mesh(&mut mesh, |c| job.support.near(c));
+    }
+    if let Some(cp) = cp {
+        fit_tile(job, points, &mut mesh, cp)?;
+    }
+    write_tile(&tile_path(job.tiles_dir, tt), &mesh)?;
+    Ok((tt, mesh))
+}
+
+/// Move the vertices of `mesh` onto their input points `cp` (when fitting) and give them
+/// their colours and intensities.
+fn fit_tile(
+    job: &TileJob,
+    points: &SharedPoints,
+    mesh: &mut TileMesh,
+    cp: &NearPoints,
+) -> Result<()> {
+    let (h, fit) = (job.plan.spacing, job.params.fit);
+    let (mut fits, inexact) = cp.fit_vertices(&mesh.positions, h, fit);
+    // Vertices whose neighbours may lie beyond the gathered box: their true neighbours lie
+    // within their current farthest one, so one wider gather around them is exact (rare:
+    // vertices far from every point).
+    if let (false, Some(src)) = (inexact.is_empty(), points.as_ref()) {
+        let reach = inexact.iter().map(|&i| fits[i].reach).fold(0.0, f64::max);
+        let mut lo = [f64::INFINITY; 3];
+        let mut hi = [f64::NEG_INFINITY; 3];
+        let vs: Vec<[f64; 3]> = inexact.iter().map(|&i| mesh.positions[i]).collect();
+        for v in &vs {
+            for a in 0..3 {
+                lo[a] = lo[a].min(v[a]);
+                hi[a] = hi[a].max(v[a]);
+            }
+        }
+        let wide = lock(src)?.near_points(lo, hi, reach * (1.0 + 1e-9) + h * 1e-6)?;
+        let (fixed, _) = wide.fit_vertices(&vs, h, fit);
+        for (&vi, f) in inexact.iter().zip(fixed) {
+            fits[vi] = f;
+        }
+    }
+    for (p, f) in mesh.positions.iter_mut().zip(&fits) {
+        *p = f.pos;
+    }
+    if job.with_color {
+        mesh.colors = fits.iter().map(|f| f.color).collect();
+    }
+    if job.with_intensity {
+        mesh.intensity = fits.iter().map(|f| f.intensity).collect();
+    }
+    Ok(())
+}
+
+/// Extract a wave on the CPU pool: blend, marching cubes, finish, in parallel.
+fn extract_cpu(
+    job: &TileJob,
+    points: &SharedPoints,
+    loaded: &[LoadedTile],
+    near_pts: &[Option<NearPoints>],
+    geom: &GridGeom,
+    pool: &rayon::ThreadPool,
+) -> Vec<Result<(u64, TileMesh)>> {
+    let plan = job.plan;
+    let own = pou::leaf_weights(plan.leaf_voxels as i64, plan.overlap_voxels as i64);
+    let dims = [(plan.tile + 1) as usize; 3];
+    pool.install(|| {
+        loaded
+            .par_iter()
+            .zip(near_pts.par_iter())
+            .map_init(McWorkspace::new, |ws, ((tt, lo, ds), cp)| {
+                let Some(ds) = ds else {
+                    return Ok((*tt, read_tile(&tile_path(job.tiles_dir, *tt))?));
+                };
+                let f = tile_blend(plan, &own, job.coarse, job.unit, *lo, ds).eval();
+                let mut mesh = TileMesh::default();
+                ws.extract(
+                    &f,
+                    dims,
+                    lo.map(|v| v as u64),
+                    job.iso as f32,
+                    geom,
+                    &mut mesh,
+                )?;
+                finish_tile(job, points, *tt, mesh, cp)
+            })
+            .collect()
+    })
+}
+
+/// What a wave's GPU extraction shares between the feeding thread and the pool.
+struct GpuWave<'w, 'a> {
+    job: &'w TileJob<'w>,
+    points: &'w SharedPoints<'a>,
+    loaded: &'w [LoadedTile],
+    near_pts: &'w [Option<NearPoints>],
+    geom: &'w GridGeom,
+}
+
+/// Extract a wave on the GPU: a thread feeds the device tile after tile (fields built there
+/// from the leaf grids) while the pool finishes the tiles it has extracted (fit, colour, trim,
+/// checkpoint). Results come back in the wave's order.
+fn extract_gpu(
+    w: &GpuWave,
+    g: &mut GpuExtractor,
+    gpu_totals: &mut GpuTotals,
+    pool: &rayon::ThreadPool,
+) -> Result<Vec<Result<(u64, TileMesh)>>> {
+    type Slot = Mutex<Option<Result<(u64, TileMesh)>>>;
+    let job = w.job;
+    let plan = job.plan;
+    let own = pou::leaf_weights(plan.leaf_voxels as i64, plan.overlap_voxels as i64);
+    let done: Vec<Slot> = w.loaded.iter().map(|_| Mutex::new(None)).collect();
+    let (tx, rx) = crossbeam_channel::bounded::<(usize, Result<TileMesh>)>(GPU_QUEUE);
+    std::thread::scope(|s| -> Result<()> {
+        let (loaded, own, geom) = (w.loaded, &own, w.geom);
+        s.spawn(move || {
+            for (i, (_, lo, ds)) in loaded.iter().enumerate() {
+                let Some(ds) = ds else { continue };
+                let b = tile_blend(plan, own, job.coarse, job.unit, *lo, ds);
+                let mut mesh = TileMesh::default();
+                // The host side of the GPU call uses rayon: keep it on our pool.
+                let r = pool
+                    .install(|| g.extract_blend(&b, job.iso as f32, geom, &mut mesh))
+                    .map(|st| {
+                        gpu_totals.add(&st);
+                        mesh
+                    });
+                if tx.send((i, r)).is_err() {
+                    break;
+                }
+            }
+        });
+        for (i, (tt, _, ds)) in loaded.iter().enumerate() {
+            if let (None, Ok(mut d)) = (ds, done[i].lock()) {
+                *d = Some(read_tile(&tile_path(job.tiles_dir, *tt)).map(|m| (*tt, m)));
+            }
+        }
+        pool.in_place_scope(|sc| {
+            for (i, r) in rx {
+                let (done, near_pts, points) = (&done, w.near_pts, w.points);
+                sc.spawn(move |_| {
+                    let tt = loaded[i].0;
+                    let r = r.and_then(|m| finish_tile(job, points, tt, m, &near_pts[i]));
+                    if let Ok(mut d) = done[i].lock() {
+                        *d = Some(r);
+                    }
+                });
+            }
+        });
+        Ok(())
+    })?;
+    Ok(done
+        .into_iter()
+        .map(|d| {
+            d.into_inner()
+                .ok()
+                .flatten()
+                .unwrap_or_else(|| Err(Error::Internal("a tile was not extracted".into())))
+        })
+        .collect())
+}
+
+/// What the GPU did over a run, for the log.
+#[derive(Debug, Default)]
+struct GpuTotals {
+    tiles: u64,
+    on_device: u64,
+    fell_back: u64,
+    leaves_sent: u64,
+    bytes: u64,
+    secs: f64,
+}
+
+impl GpuTotals {
+    fn add(&mut self, s: &crate::extract::GpuStats) {
+        self.tiles += 1;
+        self.on_device += s.field_on_gpu as u64;
+        self.fell_back += s.fell_back as u64;
+        self.leaves_sent += s.leaves_sent;
+        self.bytes += s.upload_bytes;
+        self.secs += s.upload_secs + s.kernel_secs + s.download_secs + s.host_secs;
+    }
+
+    fn log(&self) {
+        log::info!(
+            "GPU: {} tiles in {:.2} s, {} with the field built on the device, {} on the CPU \
+             after a GPU failure; {} leaf grids and {:.1} MB sent",
+            self.tiles,
+            self.secs,
+            self.on_device,
+            self.fell_back,
+            self.leaves_sent,
+            self.bytes as f64 / 1e6
+        );
+    }
+}

@@ -1,0 +1,284 @@
+//! The work directory's checkpoint formats: a leaf's detail (`SFLEAF02`) and a tile's mesh
+//! (`SFTILE04`), both zstd-compressed little-endian records written atomically, so that a
+//! killed run leaves each file whole or absent and a resumed run reuses what it finds.
+
+use std::path::{Path, PathBuf};
+
+use super::leaf::LeafDetail;
+use crate::error::{Error, IoContext, Result};
+use crate::io::atomic::{self, Durability};
+use crate::types::{CellKey, Detail, EdgeKey, MAX_SHIFT, TileMesh};
+
+/// zstd level of checkpoints: the fastest, since they are read back once.
+const ZSTD_LEVEL: i32 = 1;
+
+/// Leaf checkpoints: this magic, the cell key, the iso sum (f64) and count (u64), the detail's
+/// exponent (u32) and a flag (u32: 1 with a detail), then the detail's 16-bit values
+/// ([`quantise_detail`], padded to even), all little-endian, zstd-compressed.
+const LEAF_MAGIC: &[u8; 8] = b"SFLEAF02";
+/// Bytes of a leaf checkpoint's header: magic (8), key (8), iso sum (8), iso count (8),
+/// exponent (4), detail flag (4).
+const LEAF_HEADER: usize = 40;
+
+/// The checkpoint of leaf `key` in directory `dir`.
+pub fn leaf_path(dir: &Path, key: CellKey) -> PathBuf {
+    dir.join(format!("{}.zst", key.file_name()))
+}
+
+/// Values of a detail grid of `m³` nodes, padded to even.
+fn detail_len(m: usize) -> usize {
+    let n = m * m * m;
+    n + n % 2
+}
+
+/// Checkpoint leaf `key`'s detail `d` in directory `dir`.
+pub fn write_leaf(dir: &Path, key: CellKey, d: &LeafDetail) -> Result<()> {
+    let values = d.detail.as_ref().map_or(&[][..], |d| &d.values[..]);
+    let mut raw = Vec::with_capacity(LEAF_HEADER + values.len() * 2);
+    raw.extend_from_slice(LEAF_MAGIC);
+    raw.extend_from_slice(&key.0.to_le_bytes());
+    raw.extend_from_slice(&d.iso_sum.to_le_bytes());
+    raw.extend_from_slice(&d.iso_count.to_le_bytes());
+    raw.extend_from_slice(&d.detail.as_ref().map_or(0u32, |d| d.shift).to_le_bytes());
+    raw.extend_from_slice(&(d.detail.is_some() as u32).to_le_bytes());
+    for v in values {
+        raw.extend_from_slice(&v.to_le_bytes());
+    }
+    let z = zstd::bulk::compress(&raw, ZSTD_LEVEL)
+        .map_err(|e| Error::Internal(format!("zstd compression failed: {e}")))?;
+    // Renamed, not synced: a checkpoint lost to a crash is solved again.
+    atomic::write(&leaf_path(dir, key), &z, Durability::Renamed)
+}
+
+/// Read back leaf `key`'s checkpoint from `dir`, for a detail grid of `m³` nodes.
+pub fn read_leaf(dir: &Path, key: CellKey, m: usize) -> Result<LeafDetail> {
+    let path = leaf_path(dir, key);
+    let z = std::fs::read(&path).with_path(&path)?;
+    let n = detail_len(m);
+    let raw = zstd::bulk::decompress(&z, LEAF_HEADER + n * 2 + 16)
+        .map_err(|e| Error::input(&path, format!("corrupt leaf checkpoint: {e}")))?;
+    if raw.len() >= 8 && raw[..6] == LEAF_MAGIC[..6] && raw[..8] != LEAF_MAGIC[..] {
+        return Err(Error::input(
+            &path,
+            format!(
+                "leaf checkpoint written by another version of scanflow ({}; this one reads {}): run again without --resume in a new work directory",
+                String::from_utf8_lossy(&raw[..8]),
+                String::from_utf8_lossy(LEAF_MAGIC)
+            ),
+        ));
+    }
+    let u32_at = |o: usize| u32::from_le_bytes([raw[o], raw[o + 1], raw[o + 2], raw[o + 3]]);
+    let u64_at = |o: usize| {
+        let mut a = [0u8; 8];
+        a.copy_from_slice(&raw[o..o + 8]);
+        u64::from_le_bytes(a)
+    };
+    if raw.len() < LEAF_HEADER || raw[..8] != LEAF_MAGIC[..] {
+        return Err(Error::input(
+            &path,
+            "corrupt leaf checkpoint: wrong size or magic",
+        ));
+    }
+    let (shift, has) = (u32_at(32), u32_at(36));
+    let want = LEAF_HEADER + if has == 1 { n * 2 } else { 0 };
+    if has > 1 || raw.len() != want || shift > MAX_SHIFT {
+        return Err(Error::input(
+            &path,
+            format!(
+                "corrupt leaf checkpoint: {} bytes with detail flag {has} and exponent {shift}, expected {want} bytes and an exponent of at most {MAX_SHIFT}",
+                raw.len()
+            ),
+        ));
+    }
+    if u64_at(8) != key.0 {
+        return Err(Error::input(&path, "leaf checkpoint of another cell"));
+    }
+    let detail = (has == 1).then(|| Detail {
+        values: raw[LEAF_HEADER..]
+            .chunks_exact(2)
+            .map(|b| i16::from_le_bytes([b[0], b[1]]))
+            .collect(),
+        shift,
+    });
+    Ok(LeafDetail {
+        detail,
+        iso_sum: f64::from_bits(u64_at(16)),
+        iso_count: u64_at(24),
+    })
+}
+
+/// The detail of refined leaf `key` (the tile stage reads only those).
+pub fn leaf_detail(dir: &Path, key: CellKey, m: usize) -> Result<Detail> {
+    read_leaf(dir, key, m)?.detail.ok_or_else(|| {
+        Error::input(
+            leaf_path(dir, key),
+            "leaf checkpoint without a detail, where the run refined this leaf",
+        )
+    })
+}
+
+/// Tile checkpoints: this magic, then the counts of vertices, triangles, colours and
+/// intensities (u64 each), then the records ([`write_tile`]).
+const TILE_MAGIC: &[u8; 8] = b"SFTILE04";
+/// Bytes of a tile checkpoint's header: magic and four counts.
+const TILE_HEADER: usize = 40;
+/// Bytes of a tile checkpoint's vertex: edge key (u64) and position (f64×3).
+const TILE_VERTEX_BYTES: usize = 32;
+/// Bytes of a tile checkpoint's triangle: three u32 indices.
+const TILE_TRIANGLE_BYTES: usize = 12;
+
+/// The checkpoint of tile `t` (its Morton index) in directory `dir`.
+pub fn tile_path(dir: &Path, t: u64) -> PathBuf {
+    dir.join(format!("{t:016x}.zst"))
+}
+
+/// Checkpoint a tile's mesh (after trimming): edge keys, f64 positions, triangles, then the
+/// vertex colours when there are any.
+pub fn write_tile(path: &Path, m: &TileMesh) -> Result<()> {
+    let mut raw = Vec::with_capacity(
+        TILE_HEADER
+            + m.keys.len() * (TILE_VERTEX_BYTES + 7)
+            + m.triangles.len() * TILE_TRIANGLE_BYTES,
+    );
+    raw.extend_from_slice(TILE_MAGIC);
+    raw.extend_from_slice(&(m.keys.len() as u64).to_le_bytes());
+    raw.extend_from_slice(&(m.triangles.len() as u64).to_le_bytes());
+    raw.extend_from_slice(&(m.colors.len() as u64).to_le_bytes());
+    raw.extend_from_slice(&(m.intensity.len() as u64).to_le_bytes());
+    for k in &m.keys {
+        raw.extend_from_slice(&k.0.to_le_bytes());
+    }
+    for p in &m.positions {
+        for v in p {
+            raw.extend_from_slice(&v.to_le_bytes());
+        }
+    }
+    for t in &m.triangles {
+        for v in t {
+            raw.extend_from_slice(&v.to_le_bytes());
+        }
+    }
+    for c in &m.colors {
+        raw.extend_from_slice(c);
+    }
+    for v in &m.intensity {
+        raw.extend_from_slice(&v.to_le_bytes());
+    }
+    let z = zstd::bulk::compress(&raw, ZSTD_LEVEL)
+        .map_err(|e| Error::Internal(format!("zstd compression failed: {e}")))?;
+    atomic::write(path, &z, Durability::Renamed)
+}
+
+/// Read back a tile checkpoint written by [`write_tile`].
+pub fn read_tile(path: &Path) -> Result<TileMesh> {
+    let z = std::fs::read(path).with_path(path)?;
+    let bad = |what: &str| Error::input(path, format!("corrupt tile checkpoint: {what}"));
+    let raw = zstd::stream::decode_all(&z[..]).map_err(|e| bad(&e.to_string()))?;
+    if raw.len() < TILE_HEADER || &raw[..8] != TILE_MAGIC {
+        return Err(bad("wrong magic"));
+    }
+    let u64_at = |o: usize| {
+        let mut a = [0u8; 8];
+        a.copy_from_slice(&raw[o..o + 8]);
+        u64::from_le_bytes(a)
+    };
+    let (nv, nt) = (u64_at(8) as usize, u64_at(16) as usize);
+    let (nc, ni) = (u64_at(24) as usize, u64_at(32) as usize);
+    if !(nc == 0 || nc == nv)
+        || !(ni == 0 || ni == nv)
+        || raw.len()
+            != TILE_HEADER + nv * TILE_VERTEX_BYTES + nt * TILE_TRIANGLE_BYTES + nc * 3 + ni * 4
+    {
+        return Err(bad("wrong size"));
+    }
+    let mut m = TileMesh::default();
+    let mut o = TILE_HEADER;
+    for _ in 0..nv {
+        m.keys.push(EdgeKey(u64_at(o)));
+        o += 8;
+    }
+    for _ in 0..nv {
+        m.positions
+            .push([0, 1, 2].map(|k| f64::from_bits(u64_at(o + 8 * k))));
+        o += 24;
+    }
+    for _ in 0..nt {
+        let mut t = [0u32; 3];
+        for v in &mut t {
+            *v = u32::from_le_bytes([raw[o], raw[o + 1], raw[o + 2], raw[o + 3]]);
+            o += 4;
+        }
+        m.triangles.push(t);
+    }
+    for c in raw[o..o + nc * 3].chunks_exact(3) {
+        m.colors.push([c[0], c[1], c[2]]);
+    }
+    o += nc * 3;
+    for v in raw[o..].chunks_exact(4) {
+        m.intensity
+            .push(f32::from_le_bytes([v[0], v[1], v[2], v[3]]));
+    }
+    Ok(m)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::recon::pou::quantise_detail;
+
+    #[test]
+    fn leaf_checkpoints_round_trip_and_bad_ones_are_named() {
+        let dir = tempfile::tempdir().unwrap();
+        let m = 5;
+        let key = CellKey::new(3, [1, 2, 3]);
+        let raw: Vec<f32> = (0..m * m * m).map(|i| (i as f32 - 60.0) * 0.37).collect();
+        let refined = LeafDetail {
+            detail: Some(quantise_detail(&raw, 1.0 / 64.0)),
+            iso_sum: -12.5,
+            iso_count: 7,
+        };
+        write_leaf(dir.path(), key, &refined).unwrap();
+        let back = read_leaf(dir.path(), key, m).unwrap();
+        assert_eq!(back.detail, refined.detail);
+        assert_eq!((back.iso_sum, back.iso_count), (-12.5, 7));
+        assert_eq!(
+            leaf_detail(dir.path(), key, m).unwrap(),
+            refined.detail.unwrap()
+        );
+        // A leaf left to the coarse solution: no detail, which the tile stage must not read.
+        let plain = CellKey::new(3, [0, 0, 0]);
+        let coarse = LeafDetail {
+            detail: None,
+            iso_sum: 1.0,
+            iso_count: 2,
+        };
+        write_leaf(dir.path(), plain, &coarse).unwrap();
+        assert!(read_leaf(dir.path(), plain, m).unwrap().detail.is_none());
+        let e = leaf_detail(dir.path(), plain, m).unwrap_err().to_string();
+        assert!(e.contains("without a detail") && e.contains(".zst"), "{e}");
+        // Bad files: another grid size, another cell, an older format, garbage.
+        let e = read_leaf(dir.path(), key, m + 1).unwrap_err().to_string();
+        assert!(
+            e.contains("corrupt leaf checkpoint") && e.contains("expected"),
+            "{e}"
+        );
+        std::fs::copy(leaf_path(dir.path(), key), leaf_path(dir.path(), plain)).unwrap();
+        let e = read_leaf(dir.path(), plain, m).unwrap_err().to_string();
+        assert!(e.contains("another cell"), "{e}");
+        let mut old = b"SFLEAF01".to_vec();
+        old.extend_from_slice(&[0; 24]);
+        std::fs::write(
+            leaf_path(dir.path(), key),
+            zstd::bulk::compress(&old, 1).unwrap(),
+        )
+        .unwrap();
+        let e = read_leaf(dir.path(), key, m).unwrap_err().to_string();
+        assert!(
+            e.contains("another version of scanflow") && e.contains("SFLEAF01"),
+            "{e}"
+        );
+        std::fs::write(leaf_path(dir.path(), key), b"not zstd").unwrap();
+        let e = read_leaf(dir.path(), key, m).unwrap_err().to_string();
+        assert!(e.contains("corrupt leaf checkpoint"), "{e}");
+    }
+}

@@ -1,0 +1,219 @@
+//! The grids of one run: fine spacing, coarse ratio, leaf and tile sizes, coarse padding, all
+//! chosen once from the depth, the cube and the memory budget.
+
+use serde::{Deserialize, Serialize};
+
+use super::fft_solve::LocalGrid;
+use crate::error::{Error, Result};
+use crate::types::{CellKey, Cube};
+
+/// Peak bytes per node of a solve: the splatted normals (12) and the divergence (4).
+pub const COARSE_BYTES_PER_NODE: u64 = 16;
+
+/// Coarse voxels added to the cube's width before rounding up to a 5-smooth size: 4 on each
+/// side, so that the periodic coarse solve never wraps the surface.
+const COARSE_PAD_VOXELS: u64 = 8;
+
+/// The coarse ratio a plan starts from (the finest coarse grid it tries).
+const MIN_COARSE_RATIO: u64 = 4;
+
+/// Fine voxels of a leaf per coarse voxel: the coarse voxel is at most `E/8`, the size at
+/// which the two-level blend matches one global solve.
+const LEAF_COARSE_VOXELS: u64 = 8;
+
+/// Default tile edge in fine voxels.
+const DEFAULT_TILE_VOXELS: u64 = 64;
+
+/// Depths `reconstruct` supports.
+pub const DEPTHS: std::ops::RangeInclusive<u32> = 5..=13;
+
+/// Default `--error`: 2·10⁻⁵ of the diagonal, about a fiftieth of a voxel at depth 10: below
+/// the noise of real scans (which are then refined everywhere, as a global solve would be),
+/// above the error of the coarse solve on smooth, clean surfaces (which are then left coarse).
+pub const DEFAULT_ERROR: f64 = 2e-5;
+
+/// Default `--min-points`: a leaf needs this many samples in its cell to be refined. A fixed
+/// count, not a share of the input (the paper's 0.5% suits 10⁵ points, not 10⁹): the detail
+/// of a leaf is defined by its own samples, whatever the size of the scan.
+pub const DEFAULT_MIN_POINTS: u64 = 8;
+
+/// The smallest `m >= n` whose only prime factors are 2, 3 and 5.
+pub fn smooth_size(n: u64) -> u64 {
+    let mut m = n.max(1);
+    loop {
+        let mut k = m;
+        for p in [2, 3, 5] {
+            while k.is_multiple_of(p) {
+                k /= p;
+            }
+        }
+        if k == 1 {
+            return m;
+        }
+        m += 1;
+    }
+}
+
+/// The grids of one run. Serialised in the work directory's run description under the short
+/// names of earlier versions, so that work directories stay resumable.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Plan {
+    /// The cube.
+    pub cube: Cube,
+    /// Depth.
+    pub depth: u32,
+    /// Fine cells per edge of the cube, `N = 2^depth`.
+    #[serde(rename = "n")]
+    pub fine_cells: u64,
+    /// Fine spacing `h`, in input units.
+    #[serde(rename = "h")]
+    pub spacing: f64,
+    /// Fine voxels per coarse voxel, `r`.
+    #[serde(rename = "r")]
+    pub coarse_ratio: u64,
+    /// Leaf edge in fine voxels, `E = 8r`.
+    #[serde(rename = "e")]
+    pub leaf_voxels: u64,
+    /// Detail overlap beyond each face of a leaf, in fine voxels (`E/4`).
+    #[serde(rename = "ov")]
+    pub overlap_voxels: u64,
+    /// Octree level of leaves.
+    pub leaf_level: u32,
+    /// Coarse padding below the cube, in coarse voxels: at least 4 on each side, more where
+    /// rounding the coarse grid up to a 5-smooth size adds room (4 to 56 at the supported
+    /// depths; 7 at depth 10 with `r = 4`, 270 nodes for 256 coarse voxels).
+    #[serde(rename = "pad")]
+    pub coarse_pad: u64,
+    /// Coarse nodes per axis: the smallest 5-smooth size (fast for the FFT) holding the cube
+    /// and 4 coarse voxels of padding on each side.
+    pub coarse_nodes: u64,
+    /// Tile edge in fine voxels.
+    pub tile: u64,
+    /// Octree level of tiles.
+    pub tile_level: u32,
+    /// Smoothing width in voxels.
+    pub sigma_vox: f64,
+}
+
+impl Plan {
+    /// Choose grids for `depth` on `cube` within `coarse_budget_bytes` (the budget's
+    /// [`crate::exec::budget::Share::CoarseGrid`]): the smallest coarse ratio `r >= 4` whose
+    /// coarse solve fits it.
+    pub fn new(
+        cube: Cube,
+        depth: u32,
+        sigma_vox: f64,
+        tile: Option<u64>,
+        coarse_budget_bytes: u64,
+    ) -> Result<Plan> {
+        if !DEPTHS.contains(&depth) {
+            return Err(Error::Usage(format!(
+                "--depth {depth} is out of range: supported depths are {}..={}",
+                DEPTHS.start(),
+                DEPTHS.end()
+            )));
+        }
+        let n = 1u64 << depth;
+        let mut r = MIN_COARSE_RATIO;
+        loop {
+            let e = LEAF_COARSE_VOXELS * r;
+            let nc = smooth_size(n / r + COARSE_PAD_VOXELS);
+            let coarse_bytes = nc * nc * nc * COARSE_BYTES_PER_NODE;
+            if e >= n || coarse_bytes <= coarse_budget_bytes {
+                break;
+            }
+            r *= 2;
+        }
+        let e = (LEAF_COARSE_VOXELS * r).min(n);
+        let r = (e / LEAF_COARSE_VOXELS).max(1);
+        let coarse_nodes = smooth_size(n / r + COARSE_PAD_VOXELS);
+        let tile = tile.unwrap_or(DEFAULT_TILE_VOXELS).clamp(e, n);
+        let tile = tile.next_power_of_two().min(n);
+        Ok(Plan {
+            cube,
+            depth,
+            fine_cells: n,
+            spacing: cube.size / n as f64,
+            coarse_ratio: r,
+            leaf_voxels: e,
+            overlap_voxels: e / 4,
+            leaf_level: depth - e.trailing_zeros(),
+            coarse_pad: (coarse_nodes - n / r) / 2,
+            coarse_nodes,
+            tile,
+            tile_level: depth - tile.trailing_zeros(),
+            sigma_vox,
+        })
+    }
+
+    /// Coarse nodes per axis (periodic FFT size).
+    pub fn coarse_n(&self) -> usize {
+        self.coarse_nodes as usize
+    }
+
+    /// Coarse spacing, `r·h`.
+    pub fn coarse_spacing(&self) -> f64 {
+        self.spacing * self.coarse_ratio as f64
+    }
+
+    /// Coarse voxels per edge of the cube, `N/r`.
+    pub fn coarse_cells(&self) -> u64 {
+        self.fine_cells / self.coarse_ratio
+    }
+
+    /// The coarse global grid.
+    pub fn coarse_grid(&self) -> LocalGrid {
+        let hc = self.coarse_spacing();
+        let o = self.coarse_pad as f64 * hc;
+        LocalGrid {
+            n: self.coarse_n(),
+            h: hc,
+            origin: [
+                self.cube.origin[0] - o,
+                self.cube.origin[1] - o,
+                self.cube.origin[2] - o,
+            ],
+        }
+    }
+
+    /// Global fine node of the lower corner of leaf cell `key`.
+    pub fn leaf_node(&self, key: CellKey) -> [i64; 3] {
+        let (_, c) = key.decode();
+        c.map(|v| v as i64 * self.leaf_voxels as i64)
+    }
+
+    /// The fine local grid of a leaf: the cell embedded in a cube twice its size.
+    pub fn leaf_fine_grid(&self, key: CellKey) -> LocalGrid {
+        let g = self.leaf_node(key);
+        let half = (self.leaf_voxels / 2) as i64;
+        LocalGrid {
+            n: 2 * self.leaf_voxels as usize,
+            h: self.spacing,
+            origin: self.node_pos([g[0] - half, g[1] - half, g[2] - half]),
+        }
+    }
+
+    /// Scratch bytes of one leaf's fine solve.
+    pub fn leaf_scratch_bytes(&self) -> u64 {
+        LocalGrid {
+            n: 2 * self.leaf_voxels as usize,
+            h: self.spacing,
+            origin: [0.0; 3],
+        }
+        .scratch_bytes()
+    }
+
+    /// World position of fine node `g`.
+    pub fn node_pos(&self, g: [i64; 3]) -> [f64; 3] {
+        [
+            self.cube.origin[0] + g[0] as f64 * self.spacing,
+            self.cube.origin[1] + g[1] as f64 * self.spacing,
+            self.cube.origin[2] + g[2] as f64 * self.spacing,
+        ]
+    }
+
+    /// Nodes per axis of a leaf's detail grid.
+    pub fn detail_n(&self) -> usize {
+        (self.leaf_voxels + 2 * self.overlap_voxels + 1) as usize
+    }
+}

@@ -1,0 +1,96 @@
+//! Trimming (`--trim`): the surface is left open where no input point is near, instead of
+//! closed by the coarse solution.
+
+use crate::types::TileMesh;
+
+/// Which coarse voxels hold input points (for `--trim`).
+pub struct Support {
+    origin: [f64; 3],
+    inv_h: f64,
+    n: i64,
+    bits: Vec<u64>,
+}
+
+impl Support {
+    /// No voxel marked, on a grid of `n³` voxels of edge `spacing` from `origin` (the coarse
+    /// voxels of the cube).
+    pub fn new(origin: [f64; 3], spacing: f64, n: u64) -> Support {
+        let n = n as i64;
+        Support {
+            origin,
+            inv_h: 1.0 / spacing,
+            n,
+            bits: vec![0u64; ((n * n * n) as usize).div_ceil(64)],
+        }
+    }
+
+    fn cell(&self, p: [f64; 3]) -> [i64; 3] {
+        [0, 1, 2]
+            .map(|a| (((p[a] - self.origin[a]) * self.inv_h).floor() as i64).clamp(0, self.n - 1))
+    }
+
+    /// Mark the voxel of input point `p`.
+    pub fn mark(&mut self, p: [f64; 3]) {
+        let c = self.cell(p);
+        let i = ((c[2] * self.n + c[1]) * self.n + c[0]) as usize;
+        self.bits[i / 64] |= 1 << (i % 64);
+    }
+
+    /// True when a point lies in the coarse voxel of `p` or one of its 26 neighbours.
+    pub fn near(&self, p: [f64; 3]) -> bool {
+        let c = self.cell(p);
+        for dz in -1..=1 {
+            for dy in -1..=1 {
+                for dx in -1..=1 {
+                    let q = [c[0] + dx, c[1] + dy, c[2] + dz];
+                    if q.iter().any(|&v| v < 0 || v >= self.n) {
+                        continue;
+                    }
+                    let i = ((q[2] * self.n + q[1]) * self.n + q[0]) as usize;
+                    if self.bits[i / 64] & (1 << (i % 64)) != 0 {
+                        return true;
+                    }
+                }
+            }
+        }
+        false
+    }
+}
+
+/// Keep the triangles whose centroid `keep` accepts, and only the vertices they use.
+pub fn trim_mesh(mesh: &mut TileMesh, keep: impl Fn([f64; 3]) -> bool) {
+    let mut used = vec![u32::MAX; mesh.positions.len()];
+    let mut tris = Vec::with_capacity(mesh.triangles.len());
+    let mut keys = Vec::new();
+    let mut positions = Vec::new();
+    let mut colors = Vec::new();
+    let mut intensity = Vec::new();
+    for t in &mesh.triangles {
+        let p = t.map(|i| mesh.positions[i as usize]);
+        let c = [0, 1, 2].map(|a| (p[0][a] + p[1][a] + p[2][a]) / 3.0);
+        if !keep(c) {
+            continue;
+        }
+        let nt = t.map(|i| {
+            let i = i as usize;
+            if used[i] == u32::MAX {
+                used[i] = keys.len() as u32;
+                keys.push(mesh.keys[i]);
+                positions.push(mesh.positions[i]);
+                if let Some(c) = mesh.colors.get(i) {
+                    colors.push(*c);
+                }
+                if let Some(v) = mesh.intensity.get(i) {
+                    intensity.push(*v);
+                }
+            }
+            used[i]
+        });
+        tris.push(nt);
+    }
+    mesh.triangles = tris;
+    mesh.keys = keys;
+    mesh.positions = positions;
+    mesh.colors = colors;
+    mesh.intensity = intensity;
+}
