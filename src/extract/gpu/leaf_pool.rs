@@ -72,6 +72,14 @@ impl LeafPool {
                 usage: U::STORAGE | U::COPY_DST,
                 mapped_at_creation: false,
             })),
+            ..LeafPool::without_buffer(dm, slots, slot_bytes)
+        }
+    }
+
+    /// The bookkeeping of [`LeafPool::new`], without the device buffer.
+    fn without_buffer(dm: usize, slots: usize, slot_bytes: u64) -> LeafPool {
+        LeafPool {
+            buf: None,
             dm,
             slots,
             slot_bytes,
@@ -288,4 +296,35 @@ fn tile_words(b: &Blend<'_>, lbox: &LeafBox, slot_words: usize) -> TileWords {
         slot_words as u32,
         0,
     ]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::LeafPool;
+
+    /// Places the leaves of one tile; `(slot, fresh)` of each, or the error.
+    fn tile(pool: &mut LeafPool, ids: &[u64]) -> Result<Vec<(usize, bool)>, String> {
+        pool.begin_tile();
+        ids.iter().map(|&id| pool.place(id)).collect()
+    }
+
+    /// Free slots go first, lowest first; then the least recently used leaf's slot, never
+    /// one placed for the tile being built; resident leaves are not sent again.
+    #[test]
+    fn leaves_are_replaced_least_recently_used_first_but_never_mid_tile() {
+        let mut pool = LeafPool::without_buffer(5, 4, 252);
+        let got = tile(&mut pool, &[10, 11, 12]).unwrap();
+        assert_eq!(got, [(0, true), (1, true), (2, true)]);
+        // 11 is used again: 10 is now the least recently used, then 12.
+        let got = tile(&mut pool, &[11, 13]).unwrap();
+        assert_eq!(got, [(1, false), (3, true)]);
+        let got = tile(&mut pool, &[14, 11, 15]).unwrap();
+        assert_eq!(got, [(0, true), (1, false), (2, true)]);
+        // A full pool: older tiles' leaves go (13, 11, 15), not 14, which this tile placed
+        // first; a tile with more new leaves than slots is refused.
+        let got = tile(&mut pool, &[14, 16, 17, 18]).unwrap();
+        assert_eq!(got, [(0, false), (3, true), (1, true), (2, true)]);
+        let e = tile(&mut pool, &[19, 20, 21, 22, 23]).unwrap_err();
+        assert!(e.contains("full"), "{e}");
+    }
 }
