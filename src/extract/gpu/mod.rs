@@ -104,9 +104,9 @@ use self::buffers::Buffers;
 use self::leaf_pool::{LeafPool, TileWords};
 use self::passes::{BlockJob, BlockOutcome, Pipelines};
 use self::plan::SubBlock;
-use super::cpu::{GridGeom, McWorkspace, TileMesh};
-use super::field::Blend;
 use crate::error::{Error, Result};
+use crate::extract::cpu::{GridGeom, McWorkspace, TileMesh};
+use crate::extract::field::Blend;
 
 pub use self::adapter::adapter_names;
 
