@@ -28,10 +28,12 @@ pub(super) type TileWords = [u32; 20];
 /// The device's cache of leaf detail grids: `slots` grids of `dm³` values in one buffer.
 ///
 /// Leaf ids map to slots in an [`Lru`] whose entries are a slot's bytes, with room for
-/// `slots` of them; a new leaf takes a free slot, else the slot of the least recently used
-/// leaf. The leaves of the tile being built are the most recently used entries, and the
-/// pool holds at least as many slots as a tile has leaves, so the one evicted is never one
-/// of them ([`LeafPool::place`] checks it).
+/// `slots` of them; a new leaf takes a free slot (the lowest), else the slot of the least
+/// recently used leaf. The leaves of the tile being built are the most recently used
+/// entries, and the pool holds at least as many slots as a tile has leaves, so the one
+/// evicted is never one of them ([`LeafPool::place`] checks it). At the end of a tile its
+/// leaves are ordered by slot ([`LeafPool::end_tile`]), so leaves last used by the same tile
+/// go lowest slot first.
 pub(super) struct LeafPool {
     buf: Option<wgpu::Buffer>,
     /// Detail values per axis of a leaf grid.
@@ -43,8 +45,8 @@ pub(super) struct LeafPool {
     resident: Lru<u64, usize>,
     /// Slots holding no leaf, the lowest last.
     free: Vec<usize>,
-    /// Entries placed (found or inserted) since the tile began.
-    placed: usize,
+    /// The slots and ids placed (found or inserted) since the tile began.
+    placed: Vec<(usize, u64)>,
 }
 
 impl Default for LeafPool {
@@ -56,7 +58,7 @@ impl Default for LeafPool {
             slot_bytes: 0,
             resident: Lru::new(0),
             free: Vec::new(),
-            placed: 0,
+            placed: Vec::new(),
         }
     }
 }
@@ -85,7 +87,7 @@ impl LeafPool {
             slot_bytes,
             resident: Lru::new(slots as u64 * slot_bytes),
             free: (0..slots).rev().collect(),
-            placed: 0,
+            placed: Vec::new(),
         }
     }
 
@@ -101,20 +103,28 @@ impl LeafPool {
 
     /// Start placing the leaves of a new tile.
     fn begin_tile(&mut self) {
-        self.placed = 0;
+        self.placed.clear();
+    }
+
+    /// End the tile: its leaves become the most recently used in order of slot.
+    fn end_tile(&mut self) {
+        self.placed.sort_unstable();
+        for &(_, id) in &self.placed {
+            self.resident.touch(&id);
+        }
     }
 
     /// The slot of leaf `id` for the current tile, made its most recently used entry, and
     /// whether its grid must be written there (it was not resident).
     fn place(&mut self, id: u64) -> GpuResult<(usize, bool)> {
         if let Some(&slot) = self.resident.get(&id) {
-            self.placed += 1;
+            self.placed.push((slot, id));
             return Ok((slot, false));
         }
         let slot = match self.free.pop() {
             Some(s) => s,
             // The `placed` newest entries may be this tile's: only an older one may go.
-            None if self.resident.len() > self.placed => {
+            None if self.resident.len() > self.placed.len() => {
                 let (_, s) = self.resident.pop_oldest().ok_or("the leaf pool is full")?;
                 s
             }
@@ -123,7 +133,7 @@ impl LeafPool {
         for (_, s) in self.resident.insert(id, slot, self.slot_bytes) {
             self.free.push(s);
         }
-        self.placed += 1;
+        self.placed.push((slot, id));
         Ok((slot, true))
     }
 }
@@ -235,6 +245,7 @@ impl GpuExtractor {
             }
             table[i] = slot as u32 | l.shift << 24;
         }
+        pool.end_tile();
         self.upload_blend_tables(b, &table, stats);
         Ok(Some(tile_words(b, &lbox, slot_words)))
     }
@@ -305,11 +316,14 @@ mod tests {
     /// Places the leaves of one tile; `(slot, fresh)` of each, or the error.
     fn tile(pool: &mut LeafPool, ids: &[u64]) -> Result<Vec<(usize, bool)>, String> {
         pool.begin_tile();
-        ids.iter().map(|&id| pool.place(id)).collect()
+        let got = ids.iter().map(|&id| pool.place(id)).collect();
+        pool.end_tile();
+        got
     }
 
-    /// Free slots go first, lowest first; then the least recently used leaf's slot, never
-    /// one placed for the tile being built; resident leaves are not sent again.
+    /// Free slots go first, lowest first; then the least recently used leaf's slot (lowest
+    /// first among a tile's), never one placed for the tile being built; resident leaves are
+    /// not sent again.
     #[test]
     fn leaves_are_replaced_least_recently_used_first_but_never_mid_tile() {
         let mut pool = LeafPool::without_buffer(5, 4, 252);
@@ -324,6 +338,9 @@ mod tests {
         // first; a tile with more new leaves than slots is refused.
         let got = tile(&mut pool, &[14, 16, 17, 18]).unwrap();
         assert_eq!(got, [(0, false), (3, true), (1, true), (2, true)]);
+        // Leaves last used by the same tile go lowest slot first: 14, 17 (not 16).
+        let got = tile(&mut pool, &[21, 22]).unwrap();
+        assert_eq!(got, [(0, true), (1, true)]);
         let e = tile(&mut pool, &[19, 20, 21, 22, 23]).unwrap_err();
         assert!(e.contains("full"), "{e}");
     }
