@@ -37,7 +37,7 @@ pub fn leaves_near(
 
 /// A tile's `(T+1)³` nodes from fine node `lo` as a blend ([`Blend`]) of the coarse solution
 /// and the leaf details `details` (fixed point in `unit`), with per-axis leaf weights `own`
-/// ([`super::pou::leaf_weights`]). [`Blend::eval`] or the GPU evaluates it.
+/// ([`super::pou::leaf_weights`]). The extraction stage evaluates it (on the CPU or the GPU).
 pub fn tile_blend<'a>(
     plan: &Plan,
     own: &[i32],

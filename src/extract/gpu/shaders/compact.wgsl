@@ -1,4 +1,4 @@
-// Pass 3 of GPU marching cubes (src/extract/gpu.rs): compact the active cells, one thread per
+// Pass 3 of GPU marching cubes (src/extract/gpu/): compact the active cells, one thread per
 // node. After pass 2, counts[i].y is the number of active cells before cell i; each active
 // cell writes its node index there, in cell order. Passes 4 and 5 give one thread to each.
 

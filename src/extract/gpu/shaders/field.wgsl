@@ -1,4 +1,4 @@
-// Pass 0 of GPU marching cubes on a blended tile (src/extract/field.rs, gpu.rs): the
+// Pass 0 of GPU marching cubes on a blended tile (src/extract/field.rs, src/extract/gpu/): the
 // partition-of-unity field at the nodes of one sub-block, one thread per node, written where
 // classify.wgsl reads it. Bit for bit Blend::eval: the blend is exact 64-bit integer
 // arithmetic on fixed-point values; the one conversion to f32 is of an integer below 2^24,

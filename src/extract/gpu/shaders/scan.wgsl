@@ -1,4 +1,4 @@
-// Pass 2 of GPU marching cubes (src/extract/gpu.rs): exclusive prefix sums, in place, of the
+// Pass 2 of GPU marching cubes (src/extract/gpu/): exclusive prefix sums, in place, of the
 // first three components of `data` (the fourth is kept), so that the output position of every
 // active edge, active cell and triangle is fixed by the scan, never by atomics.
 //

@@ -1,4 +1,4 @@
-// Pass 1 of GPU marching cubes (src/extract/gpu.rs): classify cells, one thread per node.
+// Pass 1 of GPU marching cubes (src/extract/gpu/): classify cells, one thread per node.
 //
 // Node i is the lowest corner of cell i (nodes on the block's upper faces have no cell). The
 // thread writes counts[i] = (new vertices, active, triangles, case | new-edge mask << 8) for

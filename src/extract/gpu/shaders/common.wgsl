@@ -1,4 +1,4 @@
-// Shared by the passes of GPU marching cubes (src/extract/gpu.rs); prepended to each shader.
+// Shared by the passes of GPU marching cubes (src/extract/gpu/); prepended to each shader.
 
 // One block (sub-block of a tile) of sx × sy × sz nodes, x fastest: node i = (z·sy + y)·sx + x.
 struct Block {
@@ -12,7 +12,7 @@ struct Block {
     pad: u32,
 }
 
-// The case tables, one array (tables::flat_table and tables::case_edges, see gpu.rs):
+// The case tables, one array (tables::flat_table and tables::case_edges, see gpu/passes.rs):
 // [0, 257): start of case c's triangle edges (absolute index into `tables`, 3 a triangle);
 // [257, 514): start of case c's crossing edges in order of first use (tables::case_edges);
 // [514, 770): case c's triangle count | crossing-edge mask << 4.

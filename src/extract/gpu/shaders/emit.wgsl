@@ -1,4 +1,4 @@
-// Passes 4 and 5 of GPU marching cubes (src/extract/gpu.rs), one thread per active cell
+// Passes 4 and 5 of GPU marching cubes (src/extract/gpu/), one thread per active cell
 // (node index i = cells[t]).
 //
 // `vertices`: the cell writes one record per vertex that is new in it (classify.wgsl), at
