@@ -10,7 +10,17 @@ use clap::{Args, Parser, Subcommand, ValueEnum};
 use scanflow::exec::progress::{JSON_INTERVAL, Mode};
 use scanflow::extract::gpu::GpuMode;
 use scanflow::normals::NormalsMode;
+use scanflow::store::IngestParams;
 use scanflow::synth::Shape;
+
+/// `reconstruct --depth` (and the demo's): 2^9 = 512 cells per edge of the bounding cube.
+pub const DEFAULT_DEPTH: u32 = 9;
+
+/// `check --samples` (and the demo's): points sampled per distance direction.
+pub const DEFAULT_CHECK_SAMPLES: usize = 200_000;
+
+/// `synth --seed` (and the demo's).
+pub const DEFAULT_SEED: u64 = 1;
 
 /// Out-of-core streaming surface reconstruction for huge 3D scans.
 #[derive(Parser, Debug)]
@@ -184,7 +194,7 @@ pub struct SynthArgs {
     #[arg(long, default_value_t = 0.0)]
     pub noise: f64,
     /// Random seed.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = DEFAULT_SEED)]
     pub seed: u64,
     /// Output PLY.
     #[arg(short, long)]
@@ -206,13 +216,13 @@ pub struct IngestArgs {
     #[arg(long)]
     pub conf: Option<PathBuf>,
     /// Split cells until they hold at most this many points.
-    #[arg(long, default_value_t = 1_000_000)]
+    #[arg(long, default_value_t = IngestParams::default().max_cell_points)]
     pub max_cell_points: u64,
     /// Drop points with NaN/infinite coordinates (counted) instead of failing.
     #[arg(long)]
     pub skip_invalid: bool,
     /// zstd level of cell files (-7 fastest .. 19 smallest).
-    #[arg(long, default_value_t = -1, allow_negative_numbers = true)]
+    #[arg(long, default_value_t = IngestParams::default().zstd_level, allow_negative_numbers = true)]
     pub zstd_level: i32,
     /// Normal options.
     #[command(flatten)]
@@ -234,7 +244,7 @@ pub struct ReconstructArgs {
     #[arg(long)]
     pub conf: Option<PathBuf>,
     /// Octree depth: 2^depth cells per edge of the bounding cube (as PoissonRecon), 5 to 13.
-    #[arg(long, default_value_t = 9)]
+    #[arg(long, default_value_t = DEFAULT_DEPTH)]
     pub depth: u32,
     /// Tile edge in voxels (default 64; rounded up to a power of two, at least one leaf's
     /// block and at most the whole grid).
@@ -293,7 +303,7 @@ pub struct CheckArgs {
     #[arg(long)]
     pub reference: Option<PathBuf>,
     /// Sample points for each distance direction.
-    #[arg(long, default_value_t = 200_000)]
+    #[arg(long, default_value_t = DEFAULT_CHECK_SAMPLES)]
     pub samples: usize,
     /// Print JSON instead of text.
     #[arg(long)]

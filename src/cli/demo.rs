@@ -11,6 +11,7 @@ use scanflow::exec::Ctx;
 use scanflow::recon::ReconParams;
 use scanflow::synth::Shape;
 
+use super::args::{DEFAULT_CHECK_SAMPLES, DEFAULT_DEPTH, DEFAULT_SEED};
 use super::config::{DemoConfig, Inputs, NormalsConfig, Points};
 use super::reconstruct::reconstruct;
 use super::report;
@@ -18,15 +19,6 @@ use super::synth::synthesise;
 
 /// The demo scan's noise, relative to the bounding-box diagonal.
 const NOISE: f64 = 0.001;
-
-/// The demo scan's random seed (`synth`'s default).
-const SEED: u64 = 1;
-
-/// Reconstruction depth (`reconstruct`'s default).
-const DEPTH: u32 = 9;
-
-/// Sample points per distance direction of the check (`check`'s default).
-const CHECK_SAMPLES: usize = 200_000;
 
 /// Run the demo in `c.dir`, replacing the files of an earlier demo there.
 pub fn run(c: &DemoConfig, ctx: &Ctx) -> Result<()> {
@@ -40,15 +32,15 @@ pub fn run(c: &DemoConfig, ctx: &Ctx) -> Result<()> {
     for p in [&ply, &mesh, &work] {
         remove_old(p)?;
     }
-    let rep = synthesise(ctx, Shape::Bumpy, c.points, NOISE, SEED, &ply)?;
+    let rep = synthesise(ctx, Shape::Bumpy, c.points, NOISE, DEFAULT_SEED, &ply)?;
     report::demo_synth(&rep, NOISE);
     let points = Points::Files(Inputs::file(ply.clone()), NormalsConfig::default());
-    let params = ReconParams::new(DEPTH, work);
+    let params = ReconParams::new(DEFAULT_DEPTH, work);
     let st = reconstruct(ctx, &points, &mesh, &params, false)?;
     let total = t0.elapsed().as_secs_f64();
     let truth = scanflow::synth::truth_path(&ply);
-    let check = scanflow::metrics::run_check(&mesh, Some(&truth), None, CHECK_SAMPLES)?;
-    report::demo_done(&mesh, DEPTH, &st, &check, total);
+    let check = scanflow::metrics::run_check(&mesh, Some(&truth), None, DEFAULT_CHECK_SAMPLES)?;
+    report::demo_done(&mesh, DEFAULT_DEPTH, &st, &check, total);
     Ok(())
 }
 
