@@ -7,6 +7,10 @@ use std::time::{Duration, Instant};
 
 use crossbeam_channel::{Sender, bounded};
 
+/// Interval between a running stage's JSON lines (`--progress json`, and `auto` off a
+/// terminal): often enough to show a cluster job is alive, rare enough to keep logs short.
+pub const JSON_INTERVAL: Duration = Duration::from_secs(5);
+
 /// How progress is shown.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Mode {
@@ -29,7 +33,7 @@ impl Mode {
             Mode::Bars
         } else {
             Mode::Json {
-                every: Duration::from_secs(5),
+                every: JSON_INTERVAL,
             }
         }
     }
@@ -60,6 +64,12 @@ impl Progress {
             Some(m) => m.suspend(f),
             None => f(),
         }
+    }
+
+    /// Write `line` to stderr; with bars shown, the bars are hidden while it is written and
+    /// redrawn below it, so neither is torn. Log lines and error messages go through here.
+    pub fn eprintln(&self, line: &str) {
+        self.suspend(|| eprintln!("{line}"));
     }
 
     /// Start a stage counting `unit`s (`points`, `cells`) up to `total` when known.

@@ -1,4 +1,5 @@
 mod bad_input;
+mod cli;
 mod colour;
 mod common;
 mod data;

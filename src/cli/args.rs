@@ -1,0 +1,451 @@
+//! The command line as clap sees it: one struct per command, a [`ValueEnum`] per choice
+//! option, mapped onto the library's enums here. Values are checked in `config`, once.
+
+use std::ffi::OsString;
+use std::path::PathBuf;
+
+use clap::error::{ContextKind, ContextValue, ErrorKind};
+use clap::{Args, Parser, Subcommand, ValueEnum};
+
+use scanflow::exec::progress::{JSON_INTERVAL, Mode};
+use scanflow::extract::gpu::GpuMode;
+use scanflow::normals::NormalsMode;
+use scanflow::pipeline::ingest::IngestParams;
+use scanflow::synth::Shape;
+
+/// `reconstruct --depth` (and the demo's): 2^9 = 512 cells per edge of the bounding cube.
+pub const DEFAULT_DEPTH: u32 = 9;
+
+/// `check --samples` (and the demo's): points sampled per distance direction.
+pub const DEFAULT_CHECK_SAMPLES: usize = 200_000;
+
+/// `synth --seed` (and the demo's).
+pub const DEFAULT_SEED: u64 = 1;
+
+/// Out-of-core streaming surface reconstruction for huge 3D scans.
+#[derive(Parser, Debug)]
+#[command(name = "scanflow", version, about, propagate_version = true)]
+pub struct Cli {
+    /// The command.
+    #[command(subcommand)]
+    pub cmd: Cmd,
+}
+
+/// Options of every command that runs a pipeline.
+#[derive(Args, Debug, Clone)]
+pub struct Common {
+    /// Worker threads (default: one per core).
+    #[arg(long, global = true, default_value_t = 0)]
+    pub threads: usize,
+    /// Memory budget: 512M, 4G, 50% of available; default half the available memory.
+    #[arg(long, global = true)]
+    pub mem: Option<String>,
+    /// Progress display.
+    #[arg(long, global = true, value_enum, default_value_t = ProgressChoice::Auto)]
+    pub progress: ProgressChoice,
+}
+
+/// `--progress`.
+#[derive(ValueEnum, Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ProgressChoice {
+    /// Bars on a terminal, JSON lines otherwise.
+    Auto,
+    /// Bars.
+    Bars,
+    /// One JSON line on stderr per stage, and every 5 s while it runs.
+    Json,
+    /// Nothing.
+    #[value(name = "none")]
+    Quiet,
+}
+
+impl From<ProgressChoice> for Mode {
+    fn from(c: ProgressChoice) -> Mode {
+        match c {
+            ProgressChoice::Auto => Mode::detect(),
+            ProgressChoice::Bars => Mode::Bars,
+            ProgressChoice::Json => Mode::Json {
+                every: JSON_INTERVAL,
+            },
+            ProgressChoice::Quiet => Mode::Quiet,
+        }
+    }
+}
+
+/// Normal estimation options (ingest and reconstruct).
+#[derive(Args, Debug, Clone)]
+pub struct NormalOpts {
+    /// Where normals come from.
+    #[arg(long, value_enum, default_value_t = NormalsChoice::Auto)]
+    pub normals: NormalsChoice,
+    /// Neighbours per plane fit when estimating normals (the point itself included); cells
+    /// whose points are noisy use more, up to 8 times as many (see --fixed-neighbours).
+    #[arg(long, default_value_t = scanflow::normals::DEFAULT_K)]
+    pub neighbours: usize,
+    /// Use exactly --neighbours everywhere, even where noise dominates the fits.
+    #[arg(long)]
+    pub fixed_neighbours: bool,
+    /// Re-fit each estimated normal once with robust (Cauchy) weights: less pulled by noise
+    /// and outliers, a little slower.
+    #[arg(long)]
+    pub robust_normals: bool,
+    /// Scanner position x,y,z (common frame) that estimated normals face: once for all inputs,
+    /// or once per input file in order. `.conf` scans take theirs from their pose.
+    #[arg(long, value_name = "X,Y,Z")]
+    pub viewpoint: Vec<String>,
+}
+
+/// `--normals`.
+#[derive(ValueEnum, Debug, Clone, Copy, PartialEq, Eq)]
+pub enum NormalsChoice {
+    /// The inputs' normals when every input has them, else estimated.
+    Auto,
+    /// The inputs' normals; an error for an input without them.
+    Use,
+    /// Estimated, ignoring the inputs' normals.
+    Estimate,
+}
+
+impl From<NormalsChoice> for NormalsMode {
+    fn from(c: NormalsChoice) -> NormalsMode {
+        match c {
+            NormalsChoice::Auto => NormalsMode::Auto,
+            NormalsChoice::Use => NormalsMode::Use,
+            NormalsChoice::Estimate => NormalsMode::Estimate,
+        }
+    }
+}
+
+/// `--gpu`.
+#[derive(ValueEnum, Debug, Clone, Copy, PartialEq, Eq)]
+pub enum GpuChoice {
+    /// A discrete or integrated GPU when present, else the CPU.
+    Auto,
+    /// Any Vulkan/Metal/DX12 adapter, software ones included; an error if there is none.
+    On,
+    /// The CPU only.
+    Off,
+}
+
+impl From<GpuChoice> for GpuMode {
+    fn from(c: GpuChoice) -> GpuMode {
+        match c {
+            GpuChoice::Auto => GpuMode::Auto,
+            GpuChoice::On => GpuMode::On,
+            GpuChoice::Off => GpuMode::Off,
+        }
+    }
+}
+
+/// The shapes of `synth`.
+#[derive(ValueEnum, Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ShapeChoice {
+    /// Unit sphere.
+    Sphere,
+    /// Torus around the z axis, R = 1, r = 0.35.
+    Torus,
+    /// Two concentric spheres, radii 1 and 0.97 (a thin shell).
+    #[value(name = "twosheets")]
+    TwoSheets,
+    /// Unit sphere with a sinusoidal relief.
+    Bumpy,
+}
+
+impl From<ShapeChoice> for Shape {
+    fn from(c: ShapeChoice) -> Shape {
+        match c {
+            ShapeChoice::Sphere => Shape::Sphere,
+            ShapeChoice::Torus => Shape::Torus,
+            ShapeChoice::TwoSheets => Shape::TwoSheets,
+            ShapeChoice::Bumpy => Shape::Bumpy,
+        }
+    }
+}
+
+/// The commands.
+#[derive(Subcommand, Debug)]
+pub enum Cmd {
+    /// Write oriented samples of a synthetic shape, with its exact description (.truth.json).
+    Synth(SynthArgs),
+    /// Bucket point files into an on-disk octree store.
+    Ingest(IngestArgs),
+    /// Reconstruct a surface from points: adaptive two-level FFT Poisson solve, marching
+    /// cubes tile by tile; closed unless --trim.
+    Reconstruct(ReconstructArgs),
+    /// Check a mesh: counts, watertight, manifold, components; distances to a truth or reference.
+    Check(CheckArgs),
+    /// Describe a point file or a store.
+    Info(InfoArgs),
+    /// Synthesise a noisy bumpy sphere, reconstruct it at depth 9 and check the mesh against
+    /// the exact surface.
+    Demo(DemoArgs),
+}
+
+/// `scanflow synth`.
+#[derive(Args, Debug)]
+pub struct SynthArgs {
+    /// The shape (ASCII case ignored).
+    #[arg(value_enum, ignore_case = true)]
+    pub shape: ShapeChoice,
+    /// Number of points.
+    #[arg(long)]
+    pub points: u64,
+    /// Gaussian noise, relative to the bounding-box diagonal.
+    #[arg(long, default_value_t = 0.0)]
+    pub noise: f64,
+    /// Random seed.
+    #[arg(long, default_value_t = DEFAULT_SEED)]
+    pub seed: u64,
+    /// Output PLY.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Threads, memory, progress.
+    #[command(flatten)]
+    pub common: Common,
+}
+
+/// `scanflow ingest`.
+#[derive(Args, Debug)]
+pub struct IngestArgs {
+    /// Point files (PLY, LAS/LAZ, XYZ/PTS).
+    pub inputs: Vec<PathBuf>,
+    /// Output store directory (must not exist).
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Scanalyze .conf listing scans and their transforms.
+    #[arg(long)]
+    pub conf: Option<PathBuf>,
+    /// Split cells until they hold at most this many points.
+    #[arg(long, default_value_t = IngestParams::default().max_cell_points)]
+    pub max_cell_points: u64,
+    /// Drop points with NaN/infinite coordinates (counted) instead of failing.
+    #[arg(long)]
+    pub skip_invalid: bool,
+    /// zstd level of cell files (-7 fastest .. 19 smallest).
+    #[arg(long, default_value_t = IngestParams::default().zstd_level, allow_negative_numbers = true)]
+    pub zstd_level: i32,
+    /// Normal options.
+    #[command(flatten)]
+    pub normal: NormalOpts,
+    /// Threads, memory, progress.
+    #[command(flatten)]
+    pub common: Common,
+}
+
+/// `scanflow reconstruct`.
+#[derive(Args, Debug)]
+pub struct ReconstructArgs {
+    /// Point files, or one store directory made by `ingest`.
+    pub inputs: Vec<PathBuf>,
+    /// Output mesh (binary PLY).
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Scanalyze .conf listing scans and their transforms.
+    #[arg(long)]
+    pub conf: Option<PathBuf>,
+    /// Octree depth: 2^depth cells per edge of the bounding cube (as PoissonRecon), 5 to 13.
+    #[arg(long, default_value_t = DEFAULT_DEPTH)]
+    pub depth: u32,
+    /// Tile edge in voxels (default 64; rounded up to a power of two, at least one leaf's
+    /// block and at most the whole grid).
+    #[arg(long)]
+    pub tile: Option<u64>,
+    /// Work directory for the ingested store, the leaf and tile checkpoints and the run
+    /// description (default: OUTPUT.work).
+    #[arg(long)]
+    pub work_dir: Option<PathBuf>,
+    /// Continue a killed run from the leaves and tiles checkpointed in its work directory.
+    #[arg(long)]
+    pub resume: bool,
+    /// Keep the work directory after success.
+    #[arg(long)]
+    pub keep_work: bool,
+    /// Refine a leaf only where its samples are farther than this (relative to the
+    /// bounding-box diagonal) from the coarse solution's surface.
+    #[arg(long, default_value_t = scanflow::recon::DEFAULT_ERROR)]
+    pub error: f64,
+    /// Refine only leaves holding at least this many points.
+    #[arg(long, default_value_t = scanflow::recon::DEFAULT_MIN_POINTS)]
+    pub min_points: u64,
+    /// Leave the surface open where no input point supports it.
+    #[arg(long)]
+    pub trim: bool,
+    /// Width in voxels of the Gaussian that smooths the normal field before the solve
+    /// (Kazhdan 2005), in (0, 8]: larger is smoother and more robust to noise, smaller
+    /// follows the points more closely.
+    #[arg(long, default_value_t = 1.0)]
+    pub smooth: f64,
+    /// Keep the vertices where marching cubes put them, instead of moving each onto the
+    /// plane of its nearest input points (by what exceeds the plane's standard error).
+    #[arg(long)]
+    pub no_fit: bool,
+    /// Tile fields and marching cubes on the GPU. Same output either way. Off by default:
+    /// the GPU path is not yet measured faster end to end.
+    #[arg(long, value_enum, default_value_t = GpuChoice::Off)]
+    pub gpu: GpuChoice,
+    /// Normal options.
+    #[command(flatten)]
+    pub normal: NormalOpts,
+    /// Threads, memory, progress.
+    #[command(flatten)]
+    pub common: Common,
+}
+
+/// `scanflow check`.
+#[derive(Args, Debug)]
+pub struct CheckArgs {
+    /// The mesh (PLY).
+    pub mesh: PathBuf,
+    /// Exact surface written by `synth` (.truth.json).
+    #[arg(long)]
+    pub truth: Option<PathBuf>,
+    /// Reference mesh or point file.
+    #[arg(long)]
+    pub reference: Option<PathBuf>,
+    /// Sample points for each distance direction.
+    #[arg(long, default_value_t = DEFAULT_CHECK_SAMPLES)]
+    pub samples: usize,
+    /// Print JSON instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// `scanflow info`.
+#[derive(Args, Debug)]
+pub struct InfoArgs {
+    /// A point file or a store directory.
+    pub path: PathBuf,
+    /// Print JSON instead of text.
+    #[arg(long)]
+    pub json: bool,
+    /// Threads, memory, progress.
+    #[command(flatten)]
+    pub common: Common,
+}
+
+/// `scanflow demo`.
+#[derive(Args, Debug)]
+pub struct DemoArgs {
+    /// Output directory (its earlier demo files are replaced).
+    #[arg(short, long, default_value = "scanflow-demo")]
+    pub output: PathBuf,
+    /// Points to synthesise.
+    #[arg(long, default_value_t = 1_000_000)]
+    pub points: u64,
+    /// Threads, memory, progress.
+    #[command(flatten)]
+    pub common: Common,
+}
+
+/// How parsing ended without a [`Cli`].
+pub enum ParseError {
+    /// A bad choice value (`--gpu`, `--normals`, `--progress`, the synth shape): reported as
+    /// `scanflow: error: ...` with exit status 1, as when these options were parsed after clap.
+    Choice(String),
+    /// Any other clap outcome (usage error: status 2; `--help`, `--version`: status 0).
+    Clap(clap::Error),
+}
+
+impl Cli {
+    /// Parse `args` (the program name first).
+    pub fn parse_from_args(
+        args: impl IntoIterator<Item = impl Into<OsString> + Clone>,
+    ) -> Result<Cli, ParseError> {
+        Cli::try_parse_from(args).map_err(|e| match choice_message(&e) {
+            Some(msg) => ParseError::Choice(msg),
+            None => ParseError::Clap(e),
+        })
+    }
+}
+
+/// The message of a rejected choice value, worded by the library's own parser of that choice
+/// (the `--progress` one is the command line's); `None` for any other clap error.
+fn choice_message(e: &clap::Error) -> Option<String> {
+    if e.kind() != ErrorKind::InvalidValue {
+        return None;
+    }
+    let (Some(ContextValue::String(arg)), Some(ContextValue::String(value))) = (
+        e.get(ContextKind::InvalidArg),
+        e.get(ContextKind::InvalidValue),
+    ) else {
+        return None;
+    };
+    let err = |r: Result<(), scanflow::Error>| r.err().map(|e| e.to_string());
+    match arg.split_whitespace().next()? {
+        "--gpu" => err(value.parse::<GpuMode>().map(drop)),
+        "--normals" => err(value.parse::<NormalsMode>().map(drop)),
+        "<SHAPE>" => err(value.parse::<Shape>().map(drop)),
+        "--progress" => Some(format!(
+            "--progress \"{value}\": expected auto, bars, json or none"
+        )),
+        _ => None,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::CommandFactory;
+
+    #[test]
+    fn cli_is_consistent() {
+        Cli::command().debug_assert();
+    }
+
+    fn choice_error(args: &[&str]) -> String {
+        match Cli::parse_from_args(args) {
+            Err(ParseError::Choice(m)) => m,
+            Err(ParseError::Clap(e)) => panic!("{args:?}: clap error {e}"),
+            Ok(c) => panic!("{args:?}: parsed {c:?}"),
+        }
+    }
+
+    #[test]
+    fn bad_choices_keep_their_messages() {
+        let m = choice_error(&["scanflow", "synth", "cube", "--points", "1", "-o", "x"]);
+        assert_eq!(
+            m,
+            "unknown shape \"cube\": expected one of sphere, torus, twosheets, bumpy"
+        );
+        let m = choice_error(&["scanflow", "reconstruct", "a", "-o", "b", "--gpu", "yes"]);
+        assert_eq!(m, "--gpu \"yes\": expected one of auto, on, off");
+        let m = choice_error(&["scanflow", "ingest", "a", "-o", "b", "--normals", "x"]);
+        assert_eq!(m, "--normals \"x\": expected auto, use or estimate");
+        let m = choice_error(&["scanflow", "info", "a", "--progress", "loud"]);
+        assert_eq!(m, "--progress \"loud\": expected auto, bars, json or none");
+    }
+
+    #[test]
+    fn choices_map_onto_the_library() {
+        let Ok(c) =
+            Cli::parse_from_args(["scanflow", "synth", "TwoSheets", "--points", "1", "-o", "x"])
+        else {
+            panic!("synth TwoSheets parses");
+        };
+        let Cmd::Synth(a) = c.cmd else {
+            panic!("synth")
+        };
+        assert_eq!(Shape::from(a.shape), Shape::TwoSheets);
+        for shape in Shape::ALL {
+            let c = ShapeChoice::from_str(shape.name(), false).map(Shape::from);
+            assert_eq!(c, Ok(shape));
+        }
+        for mode in [GpuMode::Auto, GpuMode::On, GpuMode::Off] {
+            let c = GpuChoice::from_str(&mode.to_string(), false).map(GpuMode::from);
+            assert_eq!(c, Ok(mode));
+        }
+    }
+
+    #[test]
+    fn help_states_the_code_s_numbers() {
+        let mut cli = Cli::command();
+        let help = cli
+            .find_subcommand_mut("reconstruct")
+            .and_then(|c| c.get_arguments().find(|a| a.get_id() == "neighbours"))
+            .and_then(|a| a.get_help())
+            .map(|h| h.to_string())
+            .unwrap_or_default();
+        let cap = format!("up to {} times", scanflow::normals::MAX_K_FACTOR);
+        assert!(help.contains(&cap), "{help}");
+    }
+}

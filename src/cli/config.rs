@@ -1,0 +1,455 @@
+//! Every option checked once, before any work: the parsed [`Cli`] becomes a [`Config`] of
+//! typed values (bytes, library enums and parameters, points, paths), or the error that names
+//! the offending option. The commands then only call the library.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail};
+
+use scanflow::exec::progress::{Mode, Progress};
+use scanflow::exec::{Ctx, default_mem_bytes, parse_mem};
+use scanflow::normals::{NormalParams, NormalsMode};
+use scanflow::pipeline::ReconParams;
+use scanflow::pipeline::ingest::IngestParams;
+use scanflow::recon::DEPTHS;
+use scanflow::synth::Shape;
+
+use super::args::{
+    CheckArgs, Cli, Cmd, Common, DemoArgs, InfoArgs, IngestArgs, NormalOpts, ReconstructArgs,
+    SynthArgs,
+};
+
+/// zstd levels `--zstd-level` accepts: zstd's fast levels from -7 up to its level 19 (20 and
+/// above need zstd's "ultra" mode and far more memory).
+const ZSTD_LEVELS: std::ops::RangeInclusive<i32> = -7..=19;
+
+/// Widest `--smooth`, in voxels: as wide as the narrowest detail overlap of a leaf (a quarter
+/// of the smallest leaf block, 32 voxels).
+const MAX_SMOOTH_VOXELS: f64 = 8.0;
+
+/// One validated command.
+pub enum Config {
+    /// `scanflow synth`.
+    Synth(SynthConfig),
+    /// `scanflow ingest`.
+    Ingest(IngestConfig),
+    /// `scanflow reconstruct`.
+    Reconstruct(ReconstructConfig),
+    /// `scanflow check`.
+    Check(CheckConfig),
+    /// `scanflow info`.
+    Info(InfoConfig),
+    /// `scanflow demo`.
+    Demo(DemoConfig),
+}
+
+impl Config {
+    /// Check every option of `cli`.
+    pub fn new(cli: Cli) -> Result<Config> {
+        Ok(match cli.cmd {
+            Cmd::Synth(a) => Config::Synth(SynthConfig::new(a)?),
+            Cmd::Ingest(a) => Config::Ingest(IngestConfig::new(a)?),
+            Cmd::Reconstruct(a) => Config::Reconstruct(ReconstructConfig::new(a)?),
+            Cmd::Check(a) => Config::Check(CheckConfig::new(a)),
+            Cmd::Info(a) => Config::Info(InfoConfig::new(a)?),
+            Cmd::Demo(a) => Config::Demo(DemoConfig::new(a)?),
+        })
+    }
+}
+
+/// Threads, memory and progress of a command that runs a pipeline.
+pub struct RunConfig {
+    /// Worker threads; 0 is one per core.
+    pub threads: usize,
+    /// The memory budget, bytes.
+    pub mem_bytes: u64,
+    /// How progress is shown.
+    pub progress: Mode,
+}
+
+impl RunConfig {
+    fn new(c: &Common) -> Result<RunConfig> {
+        let mem_bytes = match &c.mem {
+            Some(s) => parse_mem(s)?,
+            None => default_mem_bytes(),
+        };
+        Ok(RunConfig {
+            threads: c.threads,
+            mem_bytes,
+            progress: c.progress.into(),
+        })
+    }
+
+    /// The worker pool, budget and progress reporter of the command.
+    pub fn ctx(&self) -> Result<Ctx> {
+        Ok(Ctx::new(
+            self.threads,
+            self.mem_bytes,
+            Progress::new(self.progress),
+        )?)
+    }
+}
+
+/// Where normals come from and how they are estimated.
+#[derive(Clone, Copy)]
+pub struct NormalsConfig {
+    /// `--normals`.
+    pub mode: NormalsMode,
+    /// `--neighbours`, `--fixed-neighbours`, `--robust-normals`. `--neighbours` is checked by
+    /// the estimation itself, which only runs when normals are estimated.
+    pub params: NormalParams,
+}
+
+impl NormalsConfig {
+    fn new(n: &NormalOpts) -> NormalsConfig {
+        NormalsConfig {
+            mode: n.normals.into(),
+            params: NormalParams {
+                k: n.neighbours,
+                robust: n.robust_normals,
+                adaptive: !n.fixed_neighbours,
+            },
+        }
+    }
+}
+
+impl Default for NormalsConfig {
+    /// `--normals auto` with the default estimation.
+    fn default() -> NormalsConfig {
+        NormalsConfig {
+            mode: NormalsMode::Auto,
+            params: NormalParams::default(),
+        }
+    }
+}
+
+/// Point files to read: plain files, a Scanalyze `.conf`, and the scanner positions.
+pub struct Inputs {
+    /// Point files given on the command line.
+    pub files: Vec<PathBuf>,
+    /// `--conf`.
+    pub conf: Option<PathBuf>,
+    /// `--viewpoint`s: none, one for all `files`, or one per file in order.
+    pub viewpoints: Vec<[f64; 3]>,
+}
+
+impl Inputs {
+    fn new(files: Vec<PathBuf>, conf: Option<PathBuf>, viewpoints: &[String]) -> Result<Inputs> {
+        let viewpoints: Vec<[f64; 3]> = viewpoints
+            .iter()
+            .map(|v| parse_point(v))
+            .collect::<Result<_>>()?;
+        let n = viewpoints.len();
+        if n > 1 && n != files.len() {
+            bail!(
+                "--viewpoint given {n} times for {} input files: give it once for all, or once per file",
+                files.len()
+            );
+        }
+        Ok(Inputs {
+            files,
+            conf,
+            viewpoints,
+        })
+    }
+
+    /// One point file, no `.conf`, no viewpoint.
+    pub fn file(path: PathBuf) -> Inputs {
+        Inputs {
+            files: vec![path],
+            conf: None,
+            viewpoints: Vec::new(),
+        }
+    }
+}
+
+/// `x,y,z` as three finite numbers.
+fn parse_point(s: &str) -> Result<[f64; 3]> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|t| t.trim().parse::<f64>())
+        .collect::<std::result::Result<_, _>>()
+        .ok()
+        .filter(|v: &Vec<f64>| v.len() == 3 && v.iter().all(|x| x.is_finite()))
+        .with_context(|| format!("--viewpoint \"{s}\": expected three numbers x,y,z"))?;
+    Ok([v[0], v[1], v[2]])
+}
+
+/// `scanflow synth`.
+pub struct SynthConfig {
+    /// Threads, memory, progress.
+    pub run: RunConfig,
+    /// The surface.
+    pub shape: Shape,
+    /// Number of points (the library rejects 0).
+    pub points: u64,
+    /// Noise relative to the bounding-box diagonal (the library rejects negative or NaN).
+    pub noise: f64,
+    /// Random seed.
+    pub seed: u64,
+    /// Output PLY.
+    pub output: PathBuf,
+}
+
+impl SynthConfig {
+    fn new(a: SynthArgs) -> Result<SynthConfig> {
+        Ok(SynthConfig {
+            run: RunConfig::new(&a.common)?,
+            shape: a.shape.into(),
+            points: a.points,
+            noise: a.noise,
+            seed: a.seed,
+            output: a.output,
+        })
+    }
+}
+
+/// `scanflow ingest`.
+pub struct IngestConfig {
+    /// Threads, memory, progress.
+    pub run: RunConfig,
+    /// What to read.
+    pub inputs: Inputs,
+    /// The store directory to create.
+    pub output: PathBuf,
+    /// Cell size, invalid points, compression, normals.
+    pub params: IngestParams,
+}
+
+impl IngestConfig {
+    fn new(a: IngestArgs) -> Result<IngestConfig> {
+        if !ZSTD_LEVELS.contains(&a.zstd_level) {
+            bail!(
+                "--zstd-level {}: expected {} ..= {}",
+                a.zstd_level,
+                ZSTD_LEVELS.start(),
+                ZSTD_LEVELS.end()
+            );
+        }
+        let run = RunConfig::new(&a.common)?;
+        let inputs = Inputs::new(a.inputs, a.conf, &a.normal.viewpoint)?;
+        let normals = NormalsConfig::new(&a.normal);
+        Ok(IngestConfig {
+            run,
+            inputs,
+            output: a.output,
+            params: IngestParams {
+                max_cell_points: a.max_cell_points,
+                skip_invalid: a.skip_invalid,
+                zstd_level: a.zstd_level,
+                normals: normals.mode,
+                normal_params: normals.params,
+                ..Default::default()
+            },
+        })
+    }
+}
+
+/// The points `reconstruct` reads.
+pub enum Points {
+    /// One store directory made by `ingest`, read as it is.
+    Store {
+        /// The store.
+        dir: PathBuf,
+        /// `--normals` or `--viewpoint` was given: they apply to `ingest`, not to a store.
+        ignores_normal_options: bool,
+    },
+    /// Point files, ingested into the work directory first.
+    Files(Inputs, NormalsConfig),
+}
+
+/// `scanflow reconstruct`.
+pub struct ReconstructConfig {
+    /// Threads, memory, progress.
+    pub run: RunConfig,
+    /// What to read.
+    pub points: Points,
+    /// The mesh to write.
+    pub output: PathBuf,
+    /// Depth, smoothing, refinement, tiles, GPU, work directory, resume.
+    pub params: ReconParams,
+    /// Keep the work directory after success.
+    pub keep_work: bool,
+}
+
+impl ReconstructConfig {
+    fn new(a: ReconstructArgs) -> Result<ReconstructConfig> {
+        let smooth = a.smooth;
+        if !(smooth > 0.0 && smooth <= MAX_SMOOTH_VOXELS) {
+            bail!("--smooth {smooth}: expected a width in voxels in (0, {MAX_SMOOTH_VOXELS}]");
+        }
+        let run = RunConfig::new(&a.common)?;
+        let error = a.error;
+        if !(error >= 0.0 && error.is_finite()) {
+            bail!(
+                "--error {error}: expected a non-negative number (relative to the bounding-box diagonal)"
+            );
+        }
+        if !DEPTHS.contains(&a.depth) {
+            bail!(
+                "--depth {} is out of range: supported depths are {}..={}",
+                a.depth,
+                DEPTHS.start(),
+                DEPTHS.end()
+            );
+        }
+        let work_dir = a.work_dir.unwrap_or_else(|| default_work_dir(&a.output));
+        let mut params = ReconParams::new(a.depth, work_dir);
+        params.tile_voxels = a.tile;
+        params.resume = a.resume;
+        params.error = error;
+        params.min_points = a.min_points;
+        params.trim = a.trim;
+        params.sigma_vox = smooth;
+        params.fit = !a.no_fit;
+        params.gpu = a.gpu.into();
+        let normals = NormalsConfig::new(&a.normal);
+        // One directory argument is a store; anything else is ingested into the work dir.
+        let points = if a.conf.is_none() && a.inputs.len() == 1 && a.inputs[0].is_dir() {
+            Points::Store {
+                ignores_normal_options: normals.mode != NormalsMode::Auto
+                    || !a.normal.viewpoint.is_empty(),
+                dir: a.inputs[0].clone(),
+            }
+        } else {
+            Points::Files(Inputs::new(a.inputs, a.conf, &a.normal.viewpoint)?, normals)
+        };
+        Ok(ReconstructConfig {
+            run,
+            points,
+            output: a.output,
+            params,
+            keep_work: a.keep_work,
+        })
+    }
+}
+
+/// `OUTPUT.work`, beside the output.
+pub fn default_work_dir(output: &Path) -> PathBuf {
+    let mut s = output.as_os_str().to_owned();
+    s.push(".work");
+    PathBuf::from(s)
+}
+
+/// `scanflow check`.
+pub struct CheckConfig {
+    /// The mesh.
+    pub mesh: PathBuf,
+    /// `--truth`.
+    pub truth: Option<PathBuf>,
+    /// `--reference` (the library refuses it together with a truth).
+    pub reference: Option<PathBuf>,
+    /// Sample points per distance direction.
+    pub samples: usize,
+    /// Print JSON.
+    pub json: bool,
+}
+
+impl CheckConfig {
+    fn new(a: CheckArgs) -> CheckConfig {
+        CheckConfig {
+            mesh: a.mesh,
+            truth: a.truth,
+            reference: a.reference,
+            samples: a.samples,
+            json: a.json,
+        }
+    }
+}
+
+/// `scanflow info`.
+pub struct InfoConfig {
+    /// Threads, memory, progress.
+    pub run: RunConfig,
+    /// A point file or a store directory.
+    pub path: PathBuf,
+    /// Print JSON.
+    pub json: bool,
+}
+
+impl InfoConfig {
+    fn new(a: InfoArgs) -> Result<InfoConfig> {
+        Ok(InfoConfig {
+            run: RunConfig::new(&a.common)?,
+            path: a.path,
+            json: a.json,
+        })
+    }
+}
+
+/// `scanflow demo`.
+pub struct DemoConfig {
+    /// Threads, memory, progress.
+    pub run: RunConfig,
+    /// The demo directory.
+    pub dir: PathBuf,
+    /// Points to synthesise.
+    pub points: u64,
+}
+
+impl DemoConfig {
+    fn new(a: DemoArgs) -> Result<DemoConfig> {
+        Ok(DemoConfig {
+            run: RunConfig::new(&a.common)?,
+            dir: a.output,
+            points: a.points,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    fn config(args: &[&str]) -> Result<Config> {
+        Config::new(Cli::try_parse_from(args)?)
+    }
+
+    fn err(args: &[&str]) -> String {
+        match config(args) {
+            Ok(_) => panic!("{args:?} accepted"),
+            Err(e) => format!("{e:#}"),
+        }
+    }
+
+    #[test]
+    fn points_parse() {
+        assert_eq!(parse_point("1, 2.5,-3").ok(), Some([1.0, 2.5, -3.0]));
+        for bad in ["", "1,2", "1,2,3,4", "1,x,3", "1,2,inf", "nan,0,0"] {
+            assert!(parse_point(bad).is_err(), "{bad}");
+        }
+    }
+
+    #[test]
+    fn bad_values_are_refused_before_any_work() {
+        let r = ["scanflow", "reconstruct", "in.ply", "-o", "out.ply"];
+        let with = |extra: &[&'static str]| [&r[..], extra].concat();
+        assert!(err(&with(&["--smooth", "0"])).contains("--smooth 0"));
+        assert!(err(&with(&["--smooth", "9"])).contains("(0, 8]"));
+        assert!(err(&with(&["--error=-1"])).contains("--error -1"));
+        assert!(err(&with(&["--depth", "30"])).contains("5..=13"));
+        assert!(err(&with(&["--mem", "lots"])).contains("--mem \"lots\""));
+        let e = err(&with(&["--viewpoint", "0,0,1", "--viewpoint", "1,0,0"]));
+        assert!(e.contains("given 2 times for 1 input files"), "{e}");
+        let i = ["scanflow", "ingest", "in.ply", "-o", "s.store"];
+        let e = err(&[&i[..], &["--zstd-level", "20"]].concat());
+        assert_eq!(e, "--zstd-level 20: expected -7 ..= 19");
+        let e = err(&[&i[..], &["--viewpoint", "1,2"]].concat());
+        assert!(e.contains("x,y,z"), "{e}");
+    }
+
+    #[test]
+    fn reconstruct_defaults() {
+        let Ok(Config::Reconstruct(c)) =
+            config(&["scanflow", "reconstruct", "a.ply", "-o", "m.ply"])
+        else {
+            panic!("reconstruct parses");
+        };
+        assert_eq!(c.params.work_dir, Path::new("m.ply.work"));
+        assert_eq!(c.params.depth, 9);
+        assert_eq!(c.params.gpu, scanflow::extract::gpu::GpuMode::Off);
+        assert!(c.params.fit && !c.params.trim && !c.keep_work);
+        assert!(matches!(c.points, Points::Files(ref i, _) if i.files.len() == 1));
+    }
+}

@@ -1,0 +1,58 @@
+//! The command line: clap parses ([`args`]), every option is checked once ([`config`]), then
+//! one file per command calls the library and prints its summary ([`report`]).
+//!
+//! Errors: a usage error clap finds exits 2 (its own message); any other error, bad option
+//! values included, prints `scanflow: error: ...` with its causes and exits 1. The library
+//! logs through [`logger`], which writes past the progress bars. stdout carries only the
+//! summaries and `info`/`check` output; a closed stdout (`scanflow ... | head`) ends the
+//! process quietly.
+
+/// `println!` that ends the process quietly when stdout is a closed pipe (`scanflow ... | head`)
+/// instead of panicking.
+macro_rules! outln {
+    ($($t:tt)*) => {{
+        use std::io::Write as _;
+        if let Err(e) = writeln!(std::io::stdout(), $($t)*) {
+            if e.kind() == std::io::ErrorKind::BrokenPipe {
+                std::process::exit(0);
+            }
+        }
+    }};
+}
+
+pub mod args;
+pub mod config;
+pub mod logger;
+
+mod check;
+mod demo;
+mod info;
+mod ingest;
+mod reconstruct;
+mod report;
+mod synth;
+
+use anyhow::Result;
+
+use scanflow::exec::Ctx;
+
+use config::{Config, RunConfig};
+
+/// Run one validated command.
+pub fn run(config: Config) -> Result<()> {
+    match config {
+        Config::Synth(c) => synth::run(&c, &start(&c.run)?),
+        Config::Ingest(c) => ingest::run(&c, &start(&c.run)?),
+        Config::Reconstruct(c) => reconstruct::run(&c, &start(&c.run)?),
+        Config::Check(c) => check::run(&c),
+        Config::Info(c) => info::run(&c, &start(&c.run)?),
+        Config::Demo(c) => demo::run(&c, &start(&c.run)?),
+    }
+}
+
+/// The command's context; from here on log lines go through its progress reporter.
+fn start(run: &RunConfig) -> Result<Ctx> {
+    let ctx = run.ctx()?;
+    logger::attach(&ctx.progress);
+    Ok(ctx)
+}

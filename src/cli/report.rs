@@ -1,0 +1,191 @@
+//! What the commands print on stdout: one summary line per finished job, and the text or
+//! JSON of `info` and `check`. Nothing else goes to stdout.
+
+use std::path::Path;
+
+use anyhow::Result;
+
+use scanflow::exec::{human_bytes, peak_rss_bytes};
+use scanflow::metrics::CheckReport;
+use scanflow::pipeline::ReconStats;
+use scanflow::store::{FileInfo, IngestStats, Store};
+use scanflow::synth::{Shape, SynthReport};
+use scanflow::types::Aabb;
+
+use super::info::StoreSummary;
+
+/// Width, in `#`, of the longest bar of the cell-size histogram.
+const HISTOGRAM_WIDTH: usize = 40;
+
+/// `synth`'s line.
+pub fn synth(r: &SynthReport, shape: Shape, out: &Path) {
+    outln!(
+        "wrote {} points of {} to {} in {:.2} s",
+        r.points,
+        shape,
+        out.display(),
+        r.secs
+    );
+}
+
+/// `ingest`'s lines: the normal estimation when it ran, then the store.
+pub fn ingest(st: &IngestStats, out: &Path) {
+    if let Some((n, secs)) = &st.normals {
+        outln!(
+            "estimated normals for {} points in {:.2} s ({:.2} M points/s; k = {}..{}, {} by viewpoint, {} by propagation, {} degenerate, {} components)",
+            st.points,
+            secs,
+            st.points as f64 / secs / 1e6,
+            n.k,
+            n.k_max,
+            n.by_viewpoint,
+            n.by_propagation,
+            n.degenerate,
+            n.components
+        );
+    }
+    outln!(
+        "ingested {} points ({} skipped as invalid) into {} cells of {} in {:.2} s: {:.2} M points/s, store {}, peak memory {}",
+        st.points,
+        st.skipped_invalid,
+        st.cells,
+        out.display(),
+        st.secs,
+        st.points as f64 / st.secs / 1e6,
+        human_bytes(st.store_bytes),
+        human_bytes(peak_rss_bytes())
+    );
+}
+
+/// `reconstruct`'s line.
+pub fn reconstruct(st: &ReconStats, out: &Path) {
+    outln!(
+        "reconstructed {} vertices, {} triangles into {} in {:.2} s ({} leaves, {} refined, iso {:.4}), peak memory {}",
+        st.vertices,
+        st.faces,
+        out.display(),
+        st.secs,
+        st.leaves,
+        st.leaves_refined,
+        st.iso,
+        human_bytes(peak_rss_bytes())
+    );
+}
+
+/// `check`'s report, as text or one JSON line.
+pub fn check(rep: &CheckReport, json: bool) -> Result<()> {
+    if json {
+        outln!("{}", serde_json::to_string(rep)?);
+    } else {
+        outln!("{rep}");
+    }
+    Ok(())
+}
+
+/// `demo`'s first line: the synthesised scan.
+pub fn demo_synth(r: &SynthReport, noise: f64) {
+    outln!(
+        "synthesised {} points of a bumpy sphere (noise {noise}) in {:.2} s",
+        r.points,
+        r.secs
+    );
+}
+
+/// `demo`'s last lines: the mesh, its check, the whole run.
+pub fn demo_done(mesh: &Path, depth: u32, st: &ReconStats, check: &CheckReport, secs: f64) {
+    outln!(
+        "reconstructed {} at depth {depth} in {:.2} s: {} vertices, {} triangles",
+        mesh.display(),
+        st.secs,
+        st.vertices,
+        st.faces
+    );
+    outln!("{check}");
+    outln!(
+        "demo done in {:.2} s, peak memory {}",
+        secs,
+        human_bytes(peak_rss_bytes())
+    );
+}
+
+/// `info` on a store: its manifest and the cells' levels and sizes.
+pub fn store(path: &Path, store: &Store, s: &StoreSummary, json: bool) -> Result<()> {
+    let m = &store.manifest;
+    if json {
+        let v = serde_json::json!({
+            "kind": "store",
+            "path": path.display().to_string(),
+            "points": m.point_count,
+            "skipped_invalid": m.skipped_invalid,
+            "attributes": m.attributes.names(),
+            "bounds": m.bounds,
+            "cells": m.cells.len(),
+            "store_bytes": s.bytes,
+            "cells_by_level": s.levels,
+            "cell_size_histogram": s.size_bits.iter().map(|(b, n)| {
+                let (lo, hi) = StoreSummary::bin_range(*b);
+                serde_json::json!({"min_points": lo, "max_points": hi, "cells": n})
+            }).collect::<Vec<_>>(),
+            "inputs": m.inputs,
+        });
+        outln!("{v}");
+        return Ok(());
+    }
+    outln!("store       {}", path.display());
+    outln!("points      {}", m.point_count);
+    if m.skipped_invalid > 0 {
+        outln!("skipped     {} invalid points", m.skipped_invalid);
+    }
+    outln!("attributes  {}", m.attributes.names().join(" "));
+    bounds(&m.bounds);
+    outln!("inputs      {}", m.inputs.len());
+    outln!(
+        "cells       {} ({}, {:.2} bytes/point)",
+        m.cells.len(),
+        human_bytes(s.bytes),
+        s.bytes as f64 / m.point_count.max(1) as f64
+    );
+    let levels: Vec<String> = s.levels.iter().map(|(l, n)| format!("L{l}:{n}")).collect();
+    outln!("levels      {}", levels.join(" "));
+    outln!("cell sizes (points per cell):");
+    let most = s.size_bits.values().copied().max().unwrap_or(1);
+    for (b, n) in &s.size_bits {
+        let (lo, hi) = StoreSummary::bin_range(*b);
+        let bar = "#".repeat((n * HISTOGRAM_WIDTH).div_ceil(most));
+        outln!("  {:>10} .. {:<10} {:>6} {}", lo, hi, n, bar);
+    }
+    Ok(())
+}
+
+/// `info` on a point file.
+pub fn file(fi: &FileInfo, json: bool) -> Result<()> {
+    if json {
+        outln!("{}", serde_json::to_string(fi)?);
+        return Ok(());
+    }
+    outln!("file        {}", fi.path);
+    outln!("format      {}", fi.format.name());
+    outln!("points      {}", fi.points);
+    outln!("attributes  {}", fi.attributes.join(" "));
+    bounds(&fi.bounds);
+    if fi.invalid_points > 0 {
+        outln!(
+            "invalid     {} points with NaN/infinite coordinates",
+            fi.invalid_points
+        );
+    }
+    Ok(())
+}
+
+/// The `bounds` line of `info`.
+fn bounds(b: &Aabb) {
+    outln!(
+        "bounds      [{:.6}, {:.6}, {:.6}] .. [{:.6}, {:.6}, {:.6}]",
+        b.min[0],
+        b.min[1],
+        b.min[2],
+        b.max[0],
+        b.max[1],
+        b.max[2]
+    );
+}
