@@ -49,7 +49,7 @@ pub fn reconstruct(
         }
     };
     let (mode, normal_params) = normals
-        .map(|n| (n.mode, n.params.clone()))
+        .map(|n| (n.mode, n.params))
         .unwrap_or_default();
     let store = open_or_ingest(&source, work, params.resume, mode, normal_params, ctx)?;
     let st = scanflow::pipeline::reconstruct(&store, output, params, ctx)?;
