@@ -48,9 +48,7 @@ pub fn reconstruct(
             (StoreSource::Points(input_specs(inputs)?), Some(normals))
         }
     };
-    let (mode, normal_params) = normals
-        .map(|n| (n.mode, n.params))
-        .unwrap_or_default();
+    let (mode, normal_params) = normals.map(|n| (n.mode, n.params)).unwrap_or_default();
     let store = open_or_ingest(&source, work, params.resume, mode, normal_params, ctx)?;
     let st = scanflow::pipeline::reconstruct(&store, output, params, ctx)?;
     if !keep_work {

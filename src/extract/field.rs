@@ -1,5 +1,5 @@
 //! Evaluating a tile's field ([`crate::types::Blend`], whose docs define it) on the CPU, bit
-//! for bit the same as the GPU (`shaders/field.wgsl`), so that leaf grids rather than dense
+//! for bit the same as the GPU (`gpu/shaders/field.wgsl`), so that leaf grids rather than dense
 //! tiles cross the bus.
 //!
 //! # Why both sides agree to the bit
