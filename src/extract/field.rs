@@ -161,7 +161,7 @@ pub(crate) mod tests {
 
     /// Owned storage behind a random [`Blend`]: fixed-point leaf details and coarse values.
     /// Built here from integers, without recon's quantisation; its weights are a partition of
-    /// unity with linear ramps over the overlap ([`RandomBlend::own`]), recon's are bumps.
+    /// unity with linear ramps over the overlap ([`RandomBlend::ramp_weights`]), recon's are bumps.
     pub(crate) struct RandomBlend {
         pub lo: [i64; 3],
         pub dims: [usize; 3],
@@ -172,6 +172,9 @@ pub(crate) mod tests {
         pub coarse_full: Vec<i32>,
         pub coarse_n: usize,
         pub details: Vec<([i64; 3], Detail)>,
+        /// Per-axis leaf weights at detail offsets ([`RandomBlend::ramp_weights`] unless a
+        /// test puts others here).
+        pub own: Vec<i32>,
     }
 
     impl RandomBlend {
@@ -219,15 +222,17 @@ pub(crate) mod tests {
                 coarse_full,
                 coarse_n,
                 details,
+                own: Self::ramp_weights(e, ov),
             }
         }
 
         /// Per-axis weights at detail offsets `0..dm`: 0 to `2^B` linearly over the first
         /// `2·ov` offsets, `2^B` over the cell, and the complement of the neighbour's ramp over
-        /// the last `2·ov`, so the cells' weights at a node sum to exactly `2^B`.
-        pub(crate) fn own(&self) -> Vec<i32> {
+        /// the last `2·ov`, so the cells' weights at a node sum to exactly `2^B`. A test may
+        /// put other weights in [`RandomBlend::own`] (recon's bumps, in the pipeline's tests).
+        pub(crate) fn ramp_weights(e: i64, ov: i64) -> Vec<i32> {
             let one = 1i64 << WEIGHT_BITS;
-            let (e, w) = (self.e, 2 * self.ov);
+            let w = 2 * ov;
             let up = |s: i64| (one * s / w).min(one);
             (0..e + w + 1)
                 .map(|s| if s < e { up(s) } else { one - up(s - e) } as i32)
@@ -270,7 +275,7 @@ pub(crate) mod tests {
                 coarse_bits: self.r.trailing_zeros(),
                 e: self.e,
                 ov: self.ov,
-                own: self.own(),
+                own: self.own.clone(),
                 unit: self.unit,
                 leaves: self
                     .details
@@ -305,7 +310,7 @@ pub(crate) mod tests {
                 c += w * self.coarse_full[(i[2] * n + i[1]) * n + i[0]] as f64 * u;
             }
             let dm = self.e + 2 * self.ov + 1;
-            let q = self.own();
+            let q = &self.own;
             let one = (1u64 << WEIGHT_BITS) as f64;
             let mut acc = 0.0;
             for (cell, Detail { values: d, shift }) in &self.details {
@@ -349,7 +354,7 @@ pub(crate) mod tests {
     #[test]
     fn the_test_weights_are_a_partition_of_unity() {
         let rb = RandomBlend::new(0, [0; 3], [2; 3], 32, 0.0);
-        let q = rb.own();
+        let q = &rb.own;
         let e = rb.e;
         assert_eq!((q[0], q[q.len() - 1]), (0, 0));
         for g in 0..3 * e {

@@ -3,7 +3,6 @@ mod cli;
 mod colour;
 mod common;
 mod data;
-mod field;
 mod ingest;
 mod normals;
 mod recon;
