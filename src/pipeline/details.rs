@@ -1,7 +1,11 @@
 //! Leaf details read back from the work directory for the tiles, through one byte-bounded
 //! cache: tiles in Morton order reuse the leaves of their neighbours.
+//!
+//! The cache holds at most its byte cap (its slice of the budget); a wave of tiles holds the
+//! details its tiles touch itself, whether the cache keeps them or not, and charges them to its
+//! own permit (`tiles::run`).
 
-use std::collections::HashSet;
+use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -15,13 +19,9 @@ use crate::types::{CellKey, Detail};
 /// Bytes of one detail value: 16-bit fixed point (`quantise_detail`).
 const DETAIL_VALUE_BYTES: u64 = 2;
 
-/// The fewest details the cache holds, whatever its byte cap: a tile needs all the leaves that
-/// reach it at once (at most 27 for a tile of one leaf, more for larger tiles).
-const MIN_DETAILS: usize = 64;
-
 /// Leaf details read back from the work directory, cached up to a byte cap. Every detail has
-/// the same size, so the cache holds a number of entries: at least [`MIN_DETAILS`], at most
-/// what the byte cap allows, and as [`DetailCache::fit`] asks in between.
+/// the same size, so the cache holds a number of entries: at least one, at most what the byte
+/// cap allows, and as [`DetailCache::fit`] asks in between.
 pub struct DetailCache {
     dir: PathBuf,
     m: usize,
@@ -33,10 +33,11 @@ pub struct DetailCache {
 }
 
 impl DetailCache {
-    /// Details of `m³` nodes from checkpoint directory `dir`, up to `cap_bytes`.
+    /// Details of `m³` nodes from checkpoint directory `dir`, up to `cap_bytes` (at least one
+    /// detail).
     pub fn new(dir: &Path, m: usize, cap_bytes: u64) -> DetailCache {
         let per = ((m * m * m) as u64 * DETAIL_VALUE_BYTES).max(1);
-        let max_entries = ((cap_bytes / per) as usize).max(MIN_DETAILS);
+        let max_entries = ((cap_bytes / per) as usize).max(1);
         DetailCache {
             dir: dir.to_path_buf(),
             m,
@@ -47,34 +48,38 @@ impl DetailCache {
         }
     }
 
-    /// Keep at most `want` entries (at least [`MIN_DETAILS`], at most the byte cap allows).
+    /// Bytes of one detail.
+    pub fn detail_bytes(&self) -> u64 {
+        self.per
+    }
+
+    /// Keep at most `want` entries (at least one, at most the byte cap allows).
     pub fn fit(&mut self, want: usize) {
-        self.cap_entries = want.clamp(MIN_DETAILS, self.max_entries);
+        self.cap_entries = want.clamp(1, self.max_entries);
         self.cache.set_capacity(self.cap_entries as u64 * self.per);
     }
 
-    /// Drop the least recently used entries until at most `keep` remain.
-    fn evict_to(&mut self, keep: usize) {
-        while self.cache.len() > keep {
-            self.cache.pop_oldest();
-        }
-    }
-
-    /// Make the details of `keys` resident: those cached become the most recently used, the
-    /// others are read in parallel on `pool` (as many as the cache holds), after evicting the
-    /// least recently used to make room. Only speed depends on this.
-    pub fn prefetch(&mut self, keys: &[CellKey], pool: &rayon::ThreadPool) -> Result<()> {
-        let mut seen = HashSet::new();
+    /// The details of `keys`: those cached become the most recently used, the others are read
+    /// in parallel on `pool` and cached (evicting the least recently used beyond the cap). The
+    /// caller holds them all, cached or not, as long as it keeps the map.
+    pub fn load(
+        &mut self,
+        keys: &[CellKey],
+        pool: &rayon::ThreadPool,
+    ) -> Result<HashMap<CellKey, Arc<Detail>>> {
+        let mut out = HashMap::new();
         let mut missing = Vec::new();
         for &k in keys {
-            if !seen.insert(k) {
+            if out.contains_key(&k) || missing.contains(&k) {
                 continue;
             }
-            if !self.cache.touch(&k) && missing.len() < self.cap_entries {
-                missing.push(k);
+            match self.cache.get(&k) {
+                Some(d) => {
+                    out.insert(k, Arc::clone(d));
+                }
+                None => missing.push(k),
             }
         }
-        self.evict_to(self.cap_entries - missing.len());
         let (dir, m) = (&self.dir, self.m);
         let loaded: Vec<Result<Detail>> = pool.install(|| {
             missing
@@ -83,18 +88,10 @@ impl DetailCache {
                 .collect()
         });
         for (k, d) in missing.into_iter().zip(loaded) {
-            self.cache.insert(k, Arc::new(d?), self.per);
+            let d = Arc::new(d?);
+            self.cache.insert(k, Arc::clone(&d), self.per);
+            out.insert(k, d);
         }
-        Ok(())
-    }
-
-    /// Leaf `k`'s detail in fixed point.
-    pub fn get(&mut self, k: CellKey) -> Result<Arc<Detail>> {
-        if let Some(d) = self.cache.peek(&k) {
-            return Ok(Arc::clone(d));
-        }
-        let d = Arc::new(leaf_detail(&self.dir, k, self.m)?);
-        self.cache.insert(k, Arc::clone(&d), self.per);
-        Ok(d)
+        Ok(out)
     }
 }

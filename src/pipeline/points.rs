@@ -164,13 +164,15 @@ impl<'a> PointSource<'a> {
 
     /// Read and sort the store cells `wanted` that are not cached yet, in parallel on `pool`
     /// (decompression is most of a cell's cost), as many as half the cache holds; the rest
-    /// are read when asked for. Only speed depends on this, never the points returned.
+    /// are read when asked for. The least recently used cells are evicted first to make room,
+    /// so the cache and the cells being read stay within its cap. Only speed depends on this,
+    /// never the points returned.
     pub fn preload(&mut self, wanted: &[usize], pool: &rayon::ThreadPool) -> Result<()> {
         let mut seen = HashSet::new();
         let mut missing = Vec::new();
         let mut est = 0u64;
         for &i in wanted {
-            if self.cache.contains(&i) || !seen.insert(i) {
+            if self.cache.touch(&i) || !seen.insert(i) {
                 continue;
             }
             // SortedCell::bytes of the cell's points, without colours.
@@ -179,6 +181,15 @@ impl<'a> PointSource<'a> {
                 break;
             }
             missing.push(i);
+        }
+        let est: u64 = missing
+            .iter()
+            .map(|&i| self.store.manifest.cells[i].count * SORTED_POINT_BYTES)
+            .sum();
+        while !missing.is_empty() && self.cache.bytes() + est > self.cap {
+            if self.cache.pop_oldest().is_none() {
+                break;
+            }
         }
         let loaded: Vec<Result<SortedCell>> =
             pool.install(|| missing.par_iter().map(|&i| self.load(i)).collect());

@@ -321,26 +321,42 @@ fn leaf_pass(
                     .map_or(0, |p| p.pos.len() as u64 * SORTED_POINT_BYTES)
             })
             .sum();
-        let _permit = ctx.budget.acquire(
-            // At most one solve a worker runs at once.
-            fine_bytes * todo.len().min(ctx.threads()) as u64 + pts_bytes,
-            "a wave of leaf solves",
-        )?;
-        let res: Vec<Result<LeafOutcome>> = ctx.pool.install(|| {
-            todo.par_iter()
-                .map(|(k, pts)| match pts {
-                    None => {
-                        let d = read_leaf(&dirs.leaves, *k, dm)?;
-                        Ok((d.iso_sum, d.iso_count, true, d.detail.is_some()))
-                    }
-                    Some(p) => {
-                        let d = refine_leaf(plan, unit, &solvers, *k, p, coarse, &rule);
-                        write_leaf(&dirs.leaves, *k, &d)?;
-                        Ok((d.iso_sum, d.iso_count, false, d.detail.is_some()))
-                    }
-                })
-                .collect()
-        });
+        // At most one solve a worker runs at once, and no more at once than fit in what is
+        // free (at least one).
+        let free = ctx.budget.total().saturating_sub(ctx.budget.used());
+        let at_once = (free.saturating_sub(pts_bytes) / fine_bytes.max(1))
+            .clamp(1, ctx.threads() as u64) as usize;
+        let bytes = fine_bytes * todo.len().min(at_once) as u64 + pts_bytes;
+        // Over the whole budget it is an error that names the sizes; otherwise it is admitted
+        // without waiting on the permits this thread holds.
+        let _permit = if bytes > ctx.budget.total() {
+            Some(ctx.budget.acquire(bytes, "a wave of leaf solves")?)
+        } else {
+            tiles::admit_now(ctx, bytes)
+        };
+        let group = if at_once < ctx.threads() {
+            at_once
+        } else {
+            todo.len().max(1)
+        };
+        let mut res: Vec<Result<LeafOutcome>> = Vec::with_capacity(todo.len());
+        for g in todo.chunks(group) {
+            res.extend(ctx.pool.install(|| {
+                g.par_iter()
+                    .map(|(k, pts)| match pts {
+                        None => {
+                            let d = read_leaf(&dirs.leaves, *k, dm)?;
+                            Ok((d.iso_sum, d.iso_count, true, d.detail.is_some()))
+                        }
+                        Some(p) => {
+                            let d = refine_leaf(plan, unit, &solvers, *k, p, coarse, &rule);
+                            write_leaf(&dirs.leaves, *k, &d)?;
+                            Ok((d.iso_sum, d.iso_count, false, d.detail.is_some()))
+                        }
+                    })
+                    .collect::<Vec<_>>()
+            }));
+        }
         for (r, k) in res.into_iter().zip(wave_keys) {
             let (s, c, was_reused, is_refined) = r?;
             iso_sum += s;

@@ -3,7 +3,7 @@
 //! the GPU, fitted to the input points and coloured, trimmed, checkpointed, then welded and
 //! streamed to the writer in Morton order.
 
-use std::collections::BTreeSet;
+use std::collections::{BTreeSet, HashSet};
 use std::path::Path;
 use std::sync::{Arc, Mutex};
 
@@ -14,7 +14,7 @@ use super::points::PointSource;
 use super::reconstruct::ReconParams;
 use crate::error::{Error, Result};
 use crate::exec::Ctx;
-use crate::exec::budget::Share;
+use crate::exec::budget::{Permit, Share};
 use crate::extract::cpu::McWorkspace;
 use crate::extract::field::BlendEval;
 use crate::extract::gpu::GpuExtractor;
@@ -31,6 +31,9 @@ const TILE_NODE_BYTES: u64 = 12;
 
 /// The margin around a tile whose input points its fit and colours read, in leaf edges.
 const NEAR_MARGIN_LEAVES: f64 = 0.25;
+
+/// Bytes a tile's input points hold: position f64×3, colour u16×3 and intensity f32.
+const NEAR_POINT_BYTES: u64 = 24 + 6 + 4;
 
 /// Tiles a wave may send to the GPU thread ahead of the pool finishing them.
 const GPU_QUEUE: usize = 2;
@@ -114,7 +117,11 @@ pub fn run(job: &TileJob, points: SharedPoints, out: &Path, ctx: &Ctx) -> Result
     let mut details = DetailCache::new(job.leaves_dir, plan.detail_n(), detail_cap);
     let _detail_permit = ctx.budget.acquire(detail_cap, "the leaf detail cache")?;
     let stage = ctx.progress.stage("tiles", Some(tiles_total), "tiles");
-    let wave = 2 * ctx.threads();
+    let sizes = WaveSizes {
+        tiles: 2 * ctx.threads(),
+        tile_bytes: (plan.tile + 1).pow(3) * TILE_NODE_BYTES,
+        detail_bytes: details.detail_bytes(),
+    };
     let mut tiles_done = 0usize;
     let mut t = 0u64;
     let last_tile = |key: EdgeKey| -> u64 {
@@ -123,13 +130,13 @@ pub fn run(job: &TileJob, points: SharedPoints, out: &Path, ctx: &Ctx) -> Result
         morton3(c)
     };
     while t < tiles_total {
-        let wave_tiles = next_wave(job, &mut t, tiles_total, wave);
+        let free = ctx.budget.total().saturating_sub(ctx.budget.used());
+        let (wave_tiles, wave_bytes) = next_wave(job, &mut t, tiles_total, &sizes, free);
+        let _permit = admit_now(ctx, wave_bytes);
         details.fit(2 * wave_tiles.iter().map(|w| w.2.len()).sum::<usize>());
         let (loaded, near_pts) = load_wave(job, &wave_tiles, &points, &mut details, ctx)?;
-        let _permit = ctx.budget.acquire(
-            loaded.len() as u64 * (plan.tile + 1).pow(3) * TILE_NODE_BYTES,
-            "a wave of tiles",
-        )?;
+        let near_bytes: u64 = near_pts.iter().flatten().map(near_points_bytes).sum();
+        let _near_permit = admit_now(ctx, near_bytes);
         let meshes = match gpu.as_mut() {
             Some(g) => {
                 let shared = GpuWave {
@@ -175,13 +182,31 @@ pub fn run(job: &TileJob, points: SharedPoints, out: &Path, ctx: &Ctx) -> Result
     })
 }
 
-/// The next wave of at most `wave` non-empty tiles from Morton index `*t` on (advanced past
-/// them): a tile is empty when no refined leaf reaches it and the coarse solution does not
-/// cross the iso-value over it.
-fn next_wave(job: &TileJob, t: &mut u64, tiles_total: u64, wave: usize) -> Vec<WaveTile> {
+/// How a wave of tiles is sized: at most `tiles` tiles, each holding `tile_bytes` while its
+/// field is built and the leaf details it touches, `detail_bytes` each.
+struct WaveSizes {
+    tiles: usize,
+    tile_bytes: u64,
+    detail_bytes: u64,
+}
+
+/// The next wave of non-empty tiles from Morton index `*t` on (advanced past them), and the
+/// bytes it holds: at most `sizes.tiles` tiles, as many as fit in `free` bytes with the
+/// distinct leaf details they touch, and at least one. A tile is empty when no refined leaf
+/// reaches it and the coarse solution does not cross the iso-value over it. Which tiles share
+/// a wave never changes the output: tiles are welded and written in Morton order.
+fn next_wave(
+    job: &TileJob,
+    t: &mut u64,
+    tiles_total: u64,
+    sizes: &WaveSizes,
+    free: u64,
+) -> (Vec<WaveTile>, u64) {
     let plan = job.plan;
     let mut wave_tiles = Vec::new();
-    while *t < tiles_total && wave_tiles.len() < wave {
+    let mut leaves = HashSet::new();
+    let mut bytes = 0u64;
+    while *t < tiles_total && wave_tiles.len() < sizes.tiles {
         let c = demorton3(*t);
         let lo = c.map(|v| v as i64 * plan.tile as i64);
         let hi = lo.map(|v| v + plan.tile as i64);
@@ -189,11 +214,33 @@ fn next_wave(job: &TileJob, t: &mut u64, tiles_total: u64, wave: usize) -> Vec<W
         let (mn, mx) = job.coarse.range(lo, hi);
         let empty = near.is_empty() && (mn as f64 > job.iso || (mx as f64) < job.iso);
         if !empty {
+            let new_leaves = near.iter().filter(|k| !leaves.contains(*k)).count() as u64;
+            let more = sizes.tile_bytes + new_leaves * sizes.detail_bytes;
+            if !wave_tiles.is_empty() && bytes + more > free {
+                // The tile opens the next wave.
+                break;
+            }
+            bytes += more;
+            leaves.extend(near.iter().copied());
             wave_tiles.push((*t, lo, near));
         }
         *t += 1;
     }
-    wave_tiles
+    (wave_tiles, bytes)
+}
+
+/// Bytes held by the input points `p` of a tile.
+fn near_points_bytes(p: &NearPoints) -> u64 {
+    p.pos.len() as u64 * NEAR_POINT_BYTES
+}
+
+/// Charge `bytes` to the budget without waiting: every permit of `reconstruct` is held by the
+/// thread that drives it, so waiting for one could wait forever. A wave of one tile (or leaf)
+/// may need more than is free; it runs anyway, charged what is free (the rest is the margin
+/// over `--mem`).
+pub(super) fn admit_now(ctx: &Ctx, bytes: u64) -> Option<Permit> {
+    let free = ctx.budget.total().saturating_sub(ctx.budget.used());
+    ctx.budget.try_acquire(bytes.min(free))
 }
 
 /// The box whose points a tile's fit and colours read: the tile from fine node `lo` and a
@@ -249,7 +296,7 @@ fn load_wave(
         src.preload(&wanted, &ctx.pool)?;
     }
     let keys: Vec<CellKey> = todo.iter().flat_map(|w| w.2.iter().copied()).collect();
-    details.prefetch(&keys, &ctx.pool)?;
+    let held = details.load(&keys, &ctx.pool)?;
     let mut loaded = Vec::with_capacity(wave_tiles.len());
     let mut near_pts = Vec::with_capacity(wave_tiles.len());
     for ((tt, lo, near), &done) in wave_tiles.iter().zip(&done) {
@@ -267,7 +314,10 @@ fn load_wave(
         });
         let mut ds = Vec::with_capacity(near.len());
         for k in near {
-            ds.push((*k, details.get(*k)?));
+            let d = held
+                .get(k)
+                .ok_or_else(|| Error::Internal(format!("leaf {k:?} was not loaded")))?;
+            ds.push((*k, Arc::clone(d)));
         }
         loaded.push((*tt, *lo, Some(ds)));
     }

@@ -429,8 +429,10 @@ fn two_level_matches_one_global_solve() {
 
 #[test]
 fn reconstruct_stays_under_mem_plus_margin() {
-    // The demo's input (a 1M-point bumpy sphere, noise 0.001) at depth 9 under --mem 256M:
-    // measured peak 118 MiB (ingest into the work directory included).
+    // The demo's input (a 1M-point bumpy sphere, noise 0.001) at depth 9 on 2 threads (more
+    // threads keep more freed buffers in the allocator's per-thread arenas): measured peaks
+    // 172 to 185 MiB under --mem 128M (the tile waves and leaf details charged, coarse ratio
+    // 8), 108 to 110 MiB under --mem 256M (ingest into the work directory included).
     let d = tempfile::tempdir().unwrap();
     let ply = d.path().join("b.ply");
     ok(&[
@@ -445,27 +447,36 @@ fn reconstruct_stays_under_mem_plus_margin() {
         "--progress",
         "none",
     ]);
-    let out = d.path().join("b_mesh.ply");
-    let o = run(&[
-        "reconstruct",
-        s(&ply),
-        "-o",
-        s(&out),
-        "--depth",
-        "9",
-        "--mem",
-        "256M",
-        "--progress",
-        "json",
-    ]);
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert!(o.status.success(), "{err}");
-    let peak = peak_rss(&err);
-    assert!(peak > 0, "no peak RSS reported: {err}");
-    // The README states the margin: 64 MiB over --mem.
-    assert!(peak < (256 + 64) << 20, "peak RSS {} MiB", peak >> 20);
-    let c = check_mesh(&read_mesh(&out).unwrap());
-    assert!(c.watertight && c.components == 1, "{c:?}");
+    for mib in [128u64, 256] {
+        let out = d.path().join(format!("b_mesh_{mib}.ply"));
+        let mem = format!("{mib}M");
+        let o = run(&[
+            "reconstruct",
+            s(&ply),
+            "-o",
+            s(&out),
+            "--depth",
+            "9",
+            "--mem",
+            &mem,
+            "--threads",
+            "2",
+            "--progress",
+            "json",
+        ]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(o.status.success(), "{err}");
+        let peak = peak_rss(&err);
+        assert!(peak > 0, "no peak RSS reported: {err}");
+        // The README states the margin: 64 MiB over --mem.
+        assert!(
+            peak < (mib + 64) << 20,
+            "--mem {mem}: peak RSS {} MiB",
+            peak >> 20
+        );
+        let c = check_mesh(&read_mesh(&out).unwrap());
+        assert!(c.watertight && c.components == 1, "{c:?}");
+    }
 }
 
 #[test]
