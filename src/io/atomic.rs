@@ -116,6 +116,17 @@ impl AtomicFile {
     }
 }
 
+/// Writes go to the temporary file; wrap it in a `BufWriter` for small writes.
+impl std::io::Write for AtomicFile {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        self.file().write(buf)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.file().flush()
+    }
+}
+
 impl Drop for AtomicFile {
     fn drop(&mut self) {
         if !self.tmp_path.as_os_str().is_empty() {

@@ -40,7 +40,6 @@ use std::io::{BufWriter, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 
 use super::atomic::{AtomicFile, with_suffix};
-use super::sink::Sink;
 use crate::error::{Error, IoContext, Result};
 
 /// Size of each write buffer.
@@ -71,7 +70,7 @@ pub struct MeshPlyWriter {
     faces_path: PathBuf,
     /// The open vertex file; `None` once finished or after a failed write. Dropping it
     /// removes the temporary file.
-    out: Option<BufWriter<Sink>>,
+    out: Option<BufWriter<AtomicFile>>,
     /// The open face file; `None` once finished or after a failed write.
     faces: Option<BufWriter<File>>,
     /// Whether vertices carry a colour.
@@ -158,7 +157,7 @@ impl MeshPlyWriter {
             final_path: path.to_path_buf(),
             tmp_path,
             faces_path: PathBuf::new(),
-            out: Some(Sink::buffered(file, BUF_BYTES)),
+            out: Some(BufWriter::with_capacity(BUF_BYTES, file)),
             faces: None,
             with_color,
             with_intensity,
@@ -325,7 +324,7 @@ impl MeshPlyWriter {
         let (Some(out), Some(faces)) = (self.out.take(), self.faces.take()) else {
             return Err(self.closed());
         };
-        let Sink(mut atomic) = out
+        let mut atomic = out
             .into_inner()
             .map_err(|e| Error::io(&self.tmp_path, e.into_error()))?;
         let file = atomic.file();

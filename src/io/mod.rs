@@ -27,8 +27,8 @@
 //!
 //! The atomic writer, [`atomic`], is the one way any output appears under its final name:
 //! written under `NAME.tmp-<pid>`, synced, renamed, the directory synced; removed when dropped
-//! before that. Both writers above (through a buffered `sink.rs`) and every other output of
-//! scanflow go through it.
+//! before that. Both writers above (a `BufWriter` over an [`atomic::AtomicFile`]) and every
+//! other output of scanflow go through it.
 
 pub mod atomic;
 pub mod conf;
@@ -38,7 +38,6 @@ pub mod mesh_write;
 pub mod mmap;
 pub mod ply;
 pub mod ply_write;
-mod sink;
 pub mod xyz;
 
 use std::path::{Path, PathBuf};

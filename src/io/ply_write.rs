@@ -16,7 +16,6 @@ use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
 use super::atomic::AtomicFile;
-use super::sink::Sink;
 use crate::error::{Error, IoContext, Result};
 use crate::types::{Attributes, PointBatch};
 
@@ -35,7 +34,7 @@ pub struct PointPlyWriter {
     tmp_path: PathBuf,
     /// The open temporary file; `None` once finished or after a failed write. Dropping it
     /// removes the temporary file.
-    out: Option<BufWriter<Sink>>,
+    out: Option<BufWriter<AtomicFile>>,
     /// Attributes written per point.
     attrs: Attributes,
     /// Points announced in the header.
@@ -120,7 +119,7 @@ impl PointPlyWriter {
         let mut w = PointPlyWriter {
             final_path: path.to_path_buf(),
             tmp_path: file.tmp_path().to_path_buf(),
-            out: Some(Sink::buffered(file, BUF_BYTES)),
+            out: Some(BufWriter::with_capacity(BUF_BYTES, file)),
             attrs,
             count,
             written: 0,
@@ -154,7 +153,7 @@ impl PointPlyWriter {
     }
 
     /// The open file, or an error once the writer is unusable.
-    fn sink(&mut self) -> Result<&mut BufWriter<Sink>> {
+    fn sink(&mut self) -> Result<&mut BufWriter<AtomicFile>> {
         match self.out.as_mut() {
             Some(w) => Ok(w),
             None => Err(Error::Internal(format!(
@@ -303,7 +302,7 @@ impl PointPlyWriter {
                 )));
             }
         };
-        let Sink(file) = out
+        let file = out
             .into_inner()
             .map_err(|e| Error::io(&self.tmp_path, e.into_error()))?;
         file.commit()
