@@ -246,8 +246,8 @@ pub struct ReconstructArgs {
     /// Octree depth: 2^depth cells per edge of the bounding cube (as PoissonRecon), 5 to 13.
     #[arg(long, default_value_t = DEFAULT_DEPTH)]
     pub depth: u32,
-    /// Tile edge in voxels (default 64; rounded up to a power of two, at least one leaf's
-    /// block and at most the whole grid).
+    /// Tile edge in voxels: a power of two from 8 to 4096 (default 64; raised to one leaf's
+    /// block and lowered to the whole grid where needed). Same output for any tile size.
     #[arg(long)]
     pub tile: Option<u64>,
     /// Work directory for the ingested store, the leaf and tile checkpoints and the run
@@ -340,7 +340,7 @@ pub struct DemoArgs {
 /// How parsing ended without a [`Cli`].
 pub enum ParseError {
     /// A bad choice value (`--gpu`, `--normals`, `--progress`, the synth shape): reported as
-    /// `scanflow: error: ...` with exit status 1, as when these options were parsed after clap.
+    /// `scanflow: error: ...` in the library's words, with the usage exit status 2.
     Choice(String),
     /// Any other clap outcome (usage error: status 2; `--help`, `--version`: status 0).
     Clap(clap::Error),

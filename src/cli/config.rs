@@ -18,10 +18,22 @@ use super::args::{
     CheckArgs, Cli, Cmd, Common, DemoArgs, InfoArgs, IngestArgs, NormalOpts, ReconstructArgs,
     SynthArgs,
 };
+use super::paths;
 
 /// zstd levels `--zstd-level` accepts: zstd's fast levels from -7 up to its level 19 (20 and
 /// above need zstd's "ultra" mode and far more memory).
 const ZSTD_LEVELS: std::ops::RangeInclusive<i32> = -7..=19;
+
+/// Fewest `--neighbours`: a plane needs three points.
+const MIN_NEIGHBOURS: usize = 3;
+
+/// Most `--threads`: more workers than this only cost memory and start-up time (a worker
+/// pool of 100,000 threads takes tens of seconds to fail).
+const MAX_THREADS: usize = 1024;
+
+/// `--tile` values: powers of two in this range (the plan then keeps a tile at least one
+/// leaf's block and at most the whole grid).
+const TILES: std::ops::RangeInclusive<u64> = 8..=4096;
 
 /// Widest `--smooth`, in voxels: as wide as the narrowest detail overlap of a leaf (a quarter
 /// of the smallest leaf block, 32 voxels).
@@ -69,6 +81,12 @@ pub struct RunConfig {
 
 impl RunConfig {
     fn new(c: &Common) -> Result<RunConfig> {
+        if c.threads > MAX_THREADS {
+            bail!(
+                "--threads {}: expected at most {MAX_THREADS} (0: one per core)",
+                c.threads
+            );
+        }
         let mem_bytes = match &c.mem {
             Some(s) => parse_mem(s)?,
             None => default_mem_bytes(),
@@ -95,21 +113,26 @@ impl RunConfig {
 pub struct NormalsConfig {
     /// `--normals`.
     pub mode: NormalsMode,
-    /// `--neighbours`, `--fixed-neighbours`, `--robust-normals`. `--neighbours` is checked by
-    /// the estimation itself, which only runs when normals are estimated.
+    /// `--neighbours` (at least 3), `--fixed-neighbours`, `--robust-normals`.
     pub params: NormalParams,
 }
 
 impl NormalsConfig {
-    fn new(n: &NormalOpts) -> NormalsConfig {
-        NormalsConfig {
+    fn new(n: &NormalOpts) -> Result<NormalsConfig> {
+        if n.neighbours < MIN_NEIGHBOURS {
+            bail!(
+                "--neighbours {}: a plane fit needs at least {MIN_NEIGHBOURS}",
+                n.neighbours
+            );
+        }
+        Ok(NormalsConfig {
             mode: n.normals.into(),
             params: NormalParams {
                 k: n.neighbours,
                 robust: n.robust_normals,
                 adaptive: !n.fixed_neighbours,
             },
-        }
+        })
     }
 }
 
@@ -153,6 +176,15 @@ impl Inputs {
         })
     }
 
+    /// The files given: point files and the `.conf`.
+    pub fn paths(&self) -> Vec<&Path> {
+        self.files
+            .iter()
+            .chain(self.conf.as_ref())
+            .map(PathBuf::as_path)
+            .collect()
+    }
+
     /// One point file, no `.conf`, no viewpoint.
     pub fn file(path: PathBuf) -> Inputs {
         Inputs {
@@ -193,6 +225,7 @@ pub struct SynthConfig {
 
 impl SynthConfig {
     fn new(a: SynthArgs) -> Result<SynthConfig> {
+        paths::output_file(&a.output, paths::PLY)?;
         Ok(SynthConfig {
             run: RunConfig::new(&a.common)?,
             shape: a.shape.into(),
@@ -228,7 +261,9 @@ impl IngestConfig {
         }
         let run = RunConfig::new(&a.common)?;
         let inputs = Inputs::new(a.inputs, a.conf, &a.normal.viewpoint)?;
-        let normals = NormalsConfig::new(&a.normal);
+        paths::new_dir(&a.output)?;
+        paths::not_an_input(&a.output, &inputs.paths())?;
+        let normals = NormalsConfig::new(&a.normal)?;
         Ok(IngestConfig {
             run,
             inputs,
@@ -293,6 +328,32 @@ impl ReconstructConfig {
                 DEPTHS.end()
             );
         }
+        if let Some(t) = a.tile
+            && !(t.is_power_of_two() && TILES.contains(&t))
+        {
+            bail!(
+                "--tile {t}: expected a power of two from {} to {}",
+                TILES.start(),
+                TILES.end()
+            );
+        }
+        paths::output_file(&a.output, paths::PLY)?;
+        let given: Vec<&Path> = a
+            .inputs
+            .iter()
+            .chain(a.conf.as_ref())
+            .map(PathBuf::as_path)
+            .collect();
+        paths::not_an_input(&a.output, &given)?;
+        if let Some(w) = &a.work_dir
+            && !paths::parent(w).is_dir()
+        {
+            bail!(
+                "--work-dir {}: directory {} does not exist",
+                w.display(),
+                paths::parent(w).display()
+            );
+        }
         let work_dir = a.work_dir.unwrap_or_else(|| default_work_dir(&a.output));
         let mut params = ReconParams::new(a.depth, work_dir);
         params.tile_voxels = a.tile;
@@ -303,7 +364,7 @@ impl ReconstructConfig {
         params.sigma_vox = smooth;
         params.fit = !a.no_fit;
         params.gpu = a.gpu.into();
-        let normals = NormalsConfig::new(&a.normal);
+        let normals = NormalsConfig::new(&a.normal)?;
         // One directory argument is a store; anything else is ingested into the work dir.
         let points = if a.conf.is_none() && a.inputs.len() == 1 && a.inputs[0].is_dir() {
             Points::Store {
@@ -389,6 +450,16 @@ pub struct DemoConfig {
 
 impl DemoConfig {
     fn new(a: DemoArgs) -> Result<DemoConfig> {
+        if a.output.exists() && !a.output.is_dir() {
+            bail!("-o {}: exists and is not a directory", a.output.display());
+        }
+        if !paths::parent(&a.output).is_dir() {
+            bail!(
+                "-o {}: directory {} does not exist",
+                a.output.display(),
+                paths::parent(&a.output).display()
+            );
+        }
         Ok(DemoConfig {
             run: RunConfig::new(&a.common)?,
             dir: a.output,

@@ -9,6 +9,7 @@ use anyhow::{Context, Result};
 
 use scanflow::exec::Ctx;
 use scanflow::pipeline::ReconParams;
+use scanflow::pipeline::workdir;
 use scanflow::synth::Shape;
 
 use super::args::{DEFAULT_CHECK_SAMPLES, DEFAULT_DEPTH, DEFAULT_SEED};
@@ -29,9 +30,10 @@ pub fn run(c: &DemoConfig, ctx: &Ctx) -> Result<()> {
     let ply = dir.join("demo_points.ply");
     let mesh = dir.join("demo.ply");
     let work = dir.join("demo.work");
-    for p in [&ply, &mesh, &work] {
+    for p in [&ply, &mesh] {
         remove_old(p)?;
     }
+    workdir::remove_owned(&work)?;
     let rep = synthesise(ctx, Shape::Bumpy, c.points, NOISE, DEFAULT_SEED, &ply)?;
     report::demo_synth(&rep, NOISE);
     let points = Points::Files(Inputs::file(ply.clone()), NormalsConfig::default());
@@ -44,14 +46,12 @@ pub fn run(c: &DemoConfig, ctx: &Ctx) -> Result<()> {
     Ok(())
 }
 
-/// Remove `p`, a file or a directory, if it exists.
+/// Remove the earlier demo's file `p`, if it exists (a directory there is left alone, and
+/// the new file's commit then reports it).
 fn remove_old(p: &Path) -> Result<()> {
-    let removed = if p.is_dir() {
-        std::fs::remove_dir_all(p)
-    } else if p.exists() {
+    if p.is_file() {
         std::fs::remove_file(p)
-    } else {
-        Ok(())
-    };
-    removed.with_context(|| format!("{}: cannot remove the old demo output", p.display()))
+            .with_context(|| format!("{}: cannot remove the old demo output", p.display()))?;
+    }
+    Ok(())
 }

@@ -1,8 +1,10 @@
 //! The command line: clap parses ([`args`]), every option is checked once ([`config`]), then
 //! one file per command calls the library and prints its summary ([`report`]).
 //!
-//! Errors: a usage error clap finds exits 2 (its own message); any other error, bad option
-//! values included, prints `scanflow: error: ...` with its causes and exits 1. The library
+//! Errors: a usage error clap finds exits 2 (its own message); a bad option value or output
+//! path found by [`config`] (before any work) prints `scanflow: error: ...` and exits 2 too;
+//! an error of the run itself (inputs, system) exits 1; SIGINT and SIGTERM exit 130 and 143
+//! after removing the temporary outputs ([`signals`]). The library
 //! logs through [`logger`], which writes past the progress bars. stdout carries only the
 //! summaries and `info`/`check` output; a closed stdout (`scanflow ... | head`) ends the
 //! process quietly.
@@ -23,11 +25,13 @@ macro_rules! outln {
 pub mod args;
 pub mod config;
 pub mod logger;
+pub mod signals;
 
 mod check;
 mod demo;
 mod info;
 mod ingest;
+mod paths;
 mod reconstruct;
 mod report;
 mod synth;

@@ -1,17 +1,22 @@
 //! `scanflow reconstruct`: a store, or point files ingested into the work directory, to a
-//! mesh.
+//! mesh. The work directory is taken through `pipeline::workdir` (made and marked, or
+//! resumed after its identity is checked), removed after success, and after a failure kept
+//! only when it holds something a resume reuses, with a word on where it is.
 
 use std::path::Path;
 
-use anyhow::{Context, Result};
+use anyhow::{Result, bail};
 
+use scanflow::Error;
 use scanflow::exec::Ctx;
-use scanflow::pipeline::ingest::{StoreSource, open_or_ingest};
+use scanflow::io::atomic;
+use scanflow::pipeline::ingest::{StoreSource, WORK_STORE, open_or_ingest};
+use scanflow::pipeline::workdir::{self, Lease, RunIdentity};
 use scanflow::pipeline::{ReconParams, ReconStats};
 
 use super::config::{Points, ReconstructConfig};
 use super::ingest::input_specs;
-use super::report;
+use super::{paths, report, signals};
 
 /// Reconstruct and print the summary.
 pub fn run(c: &ReconstructConfig, ctx: &Ctx) -> Result<()> {
@@ -20,7 +25,7 @@ pub fn run(c: &ReconstructConfig, ctx: &Ctx) -> Result<()> {
     Ok(())
 }
 
-/// Open the store, or ingest the point files into `params.work_dir` (unless a resumed run
+/// Open the store, or ingest the point files into the work directory (unless a resumed run
 /// already did), reconstruct into `output`, and remove the work directory unless
 /// `keep_work`.
 pub fn reconstruct(
@@ -30,7 +35,6 @@ pub fn reconstruct(
     params: &ReconParams,
     keep_work: bool,
 ) -> Result<ReconStats> {
-    let work = &params.work_dir;
     let (source, normals) = match points {
         Points::Store {
             dir,
@@ -49,11 +53,114 @@ pub fn reconstruct(
         }
     };
     let (mode, normal_params) = normals.map(|n| (n.mode, n.params)).unwrap_or_default();
-    let store = open_or_ingest(&source, work, params.resume, mode, normal_params, ctx)?;
-    let st = scanflow::pipeline::reconstruct(&store, output, params, ctx)?;
-    if !keep_work {
-        std::fs::remove_dir_all(work)
-            .with_context(|| format!("{}: cannot remove the work directory", work.display()))?;
+    let work = workdir::resolve(&params.work_dir, output)?;
+    check_paths(&source, output, &work)?;
+    for p in atomic::remove_stale_temps(output, false) {
+        log::info!("removed {}, left by a killed run", p.display());
     }
-    Ok(st)
+    let identity = RunIdentity::new(&source, mode, &normal_params, params)?;
+    let lease = workdir::claim(&work, &identity, params.resume)?;
+    signals::set_note(Some(kept_note(&work)));
+    let params = ReconParams {
+        work_dir: work.clone(),
+        ..params.clone()
+    };
+    let run = open_or_ingest(&source, &work, params.resume, mode, normal_params, ctx)
+        .and_then(|store| scanflow::pipeline::reconstruct(&store, output, &params, ctx))
+        .map_err(|e| name_inputs(e, &work.join(WORK_STORE), &source));
+    match run {
+        Ok(st) => {
+            signals::set_note(Some(format!("{} is complete", output.display())));
+            if !keep_work {
+                let left = lease.remove()?;
+                if !left.is_empty() {
+                    log::warn!(
+                        "{}: kept: it holds {} entries scanflow did not make",
+                        work.display(),
+                        left.len()
+                    );
+                }
+            }
+            Ok(st)
+        }
+        Err(e) => {
+            signals::set_note(None);
+            Err(after_failure(lease, e))
+        }
+    }
+}
+
+/// Most input names an error about the whole input lists.
+const NAMES_SHOWN: usize = 3;
+
+/// An error about the work directory's store as a whole (its points: too few, on a plane, no
+/// normals) is about the point files it was ingested from: name them instead.
+fn name_inputs(e: Error, store: &Path, source: &StoreSource) -> Failure {
+    match (e, source) {
+        (Error::Input { path, msg }, StoreSource::Points(specs)) if path == store => {
+            let mut names: Vec<String> = specs
+                .iter()
+                .take(NAMES_SHOWN)
+                .map(|s| s.path.display().to_string())
+                .collect();
+            if specs.len() > NAMES_SHOWN {
+                names.push(format!("and {} more", specs.len() - NAMES_SHOWN));
+            }
+            Failure::Inputs(Error::input(names.join(", "), msg))
+        }
+        (e, _) => Failure::Run(e),
+    }
+}
+
+/// Why a run failed: its inputs as a whole (nothing in the work directory can help), or
+/// anything else.
+enum Failure {
+    Inputs(Error),
+    Run(Error),
+}
+
+/// The inputs and the output are never inside the work directory (what success removes),
+/// and the output is never an input.
+fn check_paths(source: &StoreSource, output: &Path, work: &Path) -> Result<()> {
+    let inputs: Vec<&Path> = match source {
+        StoreSource::Store(dir) => vec![dir.as_path()],
+        StoreSource::Points(specs) => specs.iter().map(|s| s.path.as_path()).collect(),
+    };
+    paths::not_an_input(output, &inputs)?;
+    for p in inputs.iter().copied().chain([output]) {
+        if paths::inside(p, work) || paths::same_file(p, work) {
+            bail!(
+                "{}: lies inside the work directory {}, which scanflow removes after the run; choose another --work-dir",
+                p.display(),
+                work.display()
+            );
+        }
+    }
+    Ok(())
+}
+
+/// The interrupt and failure note for a work directory kept for `--resume`.
+fn kept_note(work: &Path) -> String {
+    format!(
+        "no output written; the work directory {} is kept: run the same command with --resume to continue",
+        work.display()
+    )
+}
+
+/// After a failed run: keep the work directory when a resume can reuse it (and say so),
+/// else remove what scanflow made there.
+fn after_failure(lease: Lease, f: Failure) -> anyhow::Error {
+    let (e, reusable) = match f {
+        Failure::Inputs(e) => (e, false),
+        Failure::Run(e) => (e, lease.has_checkpoints()),
+    };
+    if reusable {
+        log::warn!("{}", kept_note(lease.dir()));
+        return e.into();
+    }
+    match lease.remove() {
+        Ok(_) => e.into(),
+        Err(r) => anyhow::Error::from(e)
+            .context(format!("and the work directory could not be removed: {r}")),
+    }
 }

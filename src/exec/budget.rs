@@ -135,6 +135,24 @@ impl Budget {
         })
     }
 
+    /// Admit `bytes` now or fail: for a caller whose thread holds the permits that would have
+    /// to be freed first, where waiting would wait forever. The error names `what`, its size
+    /// and what is free.
+    pub fn acquire_now(self: &Arc<Self>, bytes: u64, what: &str) -> Result<Permit> {
+        if let Some(p) = self.try_acquire(bytes) {
+            return Ok(p);
+        }
+        if bytes > self.total {
+            return self.acquire(bytes, what);
+        }
+        Err(Error::Usage(format!(
+            "{what} needs {} but only {} of the memory budget (--mem {}) is free at that point; raise --mem",
+            human_bytes(bytes),
+            human_bytes(self.total.saturating_sub(self.used())),
+            human_bytes(self.total)
+        )))
+    }
+
     /// Admit `bytes` if they fit now.
     pub fn try_acquire(self: &Arc<Self>, bytes: u64) -> Option<Permit> {
         let mut g = self.lock();

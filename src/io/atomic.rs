@@ -6,13 +6,186 @@
 //!
 //! Every output scanflow writes goes through here: meshes and point clouds, synthetic truths,
 //! store cells and manifests, checkpoints and tile meshes in the work directory, and the store
-//! directory itself ([`commit_dir`]).
+//! directory itself ([`TempDir`]).
+//!
+//! **Interrupts.** Every temporary file and directory is created, renamed and removed through
+//! one table of the process's live temporary paths. [`remove_live_temps`] (called by the
+//! command line on SIGINT or SIGTERM, just before it exits) removes them all and closes the
+//! table, so that no temporary name can appear or be committed afterwards: an interrupted run
+//! leaves no temporary file. A run killed outright (SIGKILL, power loss) leaves its
+//! temporary names behind; [`remove_stale_temps`] removes those of dead processes when the
+//! next run of the same output, or the resume, starts.
 
+use std::collections::BTreeSet;
 use std::ffi::OsString;
 use std::fs::File;
 use std::path::{Path, PathBuf};
+use std::sync::{Mutex, MutexGuard};
 
-use crate::error::{IoContext, Result};
+use crate::error::{Error, IoContext, Result};
+
+/// The live temporary paths of this process, and whether an interrupt closed the table.
+struct Live {
+    paths: BTreeSet<PathBuf>,
+    closed: bool,
+}
+
+static LIVE: Mutex<Live> = Mutex::new(Live {
+    paths: BTreeSet::new(),
+    closed: false,
+});
+
+/// The table, whatever a panicking thread left it as.
+fn live() -> MutexGuard<'static, Live> {
+    LIVE.lock().unwrap_or_else(|p| p.into_inner())
+}
+
+/// The error for any temporary name wanted after an interrupt.
+fn interrupted(path: &Path) -> std::io::Error {
+    std::io::Error::new(
+        std::io::ErrorKind::Interrupted,
+        format!("{}: not written: the run was interrupted", path.display()),
+    )
+}
+
+/// Create (truncating) the temporary file `tmp`, recorded as live.
+pub fn create_temp_file(tmp: &Path) -> Result<File> {
+    let mut t = live();
+    if t.closed {
+        return Err(Error::io(tmp, interrupted(tmp)));
+    }
+    let f = File::options()
+        .read(true)
+        .write(true)
+        .create(true)
+        .truncate(true)
+        .open(tmp)
+        .with_path(tmp)?;
+    t.paths.insert(tmp.to_path_buf());
+    Ok(f)
+}
+
+/// Rename the live temporary `tmp` to `path` (a file or a directory); it is no longer live.
+fn rename_live(tmp: &Path, path: &Path) -> Result<()> {
+    let mut t = live();
+    if t.closed {
+        return Err(Error::io(path, interrupted(path)));
+    }
+    std::fs::rename(tmp, path).with_path(path)?;
+    t.paths.remove(tmp);
+    Ok(())
+}
+
+/// Remove the live temporary file or directory `tmp` (best effort: it may be gone).
+pub fn remove_temp(tmp: &Path) {
+    let mut t = live();
+    if t.paths.remove(tmp) {
+        remove_path(tmp);
+    }
+}
+
+/// Remove a file or a directory tree, ignoring errors.
+fn remove_path(p: &Path) {
+    match std::fs::symlink_metadata(p) {
+        Ok(m) if m.is_dir() => drop(std::fs::remove_dir_all(p)),
+        Ok(_) => drop(std::fs::remove_file(p)),
+        Err(_) => {}
+    }
+}
+
+/// Remove every live temporary file and directory of this process and close the table: from
+/// now on no temporary name is created and none is committed. For the command line's
+/// SIGINT/SIGTERM handler, which exits right after. Returns how many were removed.
+pub fn remove_live_temps() -> usize {
+    let mut t = live();
+    t.closed = true;
+    let paths = std::mem::take(&mut t.paths);
+    // Keep the table locked until the process exits: a thread in the middle of a rename or a
+    // create waits here instead of finishing it.
+    std::mem::forget(t);
+    for p in &paths {
+        remove_path(p);
+    }
+    paths.len()
+}
+
+/// Whether the process `pid` is alive. Without `/proc` (not Linux) nobody can tell, and every
+/// process counts as alive, so nothing is removed.
+fn alive(pid: u32) -> bool {
+    let proc = Path::new("/proc");
+    !proc.join("self").exists() || proc.join(pid.to_string()).exists()
+}
+
+/// The pid in a temporary name `NAME.tmp-<pid>[.faces]` of `name`, if `file` is one.
+fn temp_pid(file: &str, name: &str) -> Option<u32> {
+    let rest = file.strip_prefix(name)?.strip_prefix(".tmp-")?;
+    let digits = rest.strip_suffix(".faces").unwrap_or(rest);
+    digits.parse().ok()
+}
+
+/// Remove the temporary files and directories that killed processes left for `path` (its
+/// `path.tmp-<pid>` names, and the store's `.NAME.tmp-<pid>` directories), and, when
+/// `recursive` and `path` is a directory of ours, for everything inside it. Returns what was
+/// removed. Live processes' temporaries (a concurrent run) are left alone.
+pub fn remove_stale_temps(path: &Path, recursive: bool) -> Vec<PathBuf> {
+    let mut removed = Vec::new();
+    let parent = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    if let Some(name) = path.file_name().and_then(|n| n.to_str()) {
+        stale_in(
+            &parent,
+            &[name.to_string(), format!(".{name}")],
+            &mut removed,
+        );
+    }
+    if recursive && path.is_dir() {
+        let mut stack = vec![path.to_path_buf()];
+        while let Some(dir) = stack.pop() {
+            let Ok(rd) = std::fs::read_dir(&dir) else {
+                continue;
+            };
+            let mut names = Vec::new();
+            for e in rd.flatten() {
+                let p = e.path();
+                if e.file_type().map(|t| t.is_dir()).unwrap_or(false) {
+                    stack.push(p);
+                }
+                if let Some(n) = e.file_name().to_str() {
+                    names.push(n.to_string());
+                }
+            }
+            let stems: Vec<String> = names
+                .iter()
+                .filter_map(|n| n.find(".tmp-").map(|i| n[..i].to_string()))
+                .collect();
+            stale_in(&dir, &stems, &mut removed);
+        }
+    }
+    removed
+}
+
+/// Remove the entries of `dir` that are temporary names of dead processes for one of `names`.
+fn stale_in(dir: &Path, names: &[String], removed: &mut Vec<PathBuf>) {
+    let Ok(rd) = std::fs::read_dir(dir) else {
+        return;
+    };
+    for e in rd.flatten() {
+        let Some(file) = e.file_name().to_str().map(str::to_string) else {
+            continue;
+        };
+        let dead = names
+            .iter()
+            .filter_map(|n| temp_pid(&file, n))
+            .any(|pid| pid != std::process::id() && !alive(pid));
+        if dead {
+            let p = e.path();
+            remove_path(&p);
+            removed.push(p);
+        }
+    }
+}
 
 /// `path` with `suffix` appended to its file name.
 pub fn with_suffix(path: &Path, suffix: &str) -> PathBuf {
@@ -68,7 +241,7 @@ impl AtomicFile {
     /// Create the temporary file for `path` (`path.tmp-<pid>`), truncating a stale one.
     pub fn create(path: &Path) -> Result<AtomicFile> {
         let tmp_path = temp_name(path);
-        let file = File::create(&tmp_path).with_path(&tmp_path)?;
+        let file = create_temp_file(&tmp_path)?;
         Ok(AtomicFile {
             final_path: path.to_path_buf(),
             tmp_path,
@@ -107,7 +280,7 @@ impl AtomicFile {
             }
             drop(f);
         }
-        std::fs::rename(&self.tmp_path, &self.final_path).with_path(&self.final_path)?;
+        rename_live(&self.tmp_path, &self.final_path)?;
         self.tmp_path = PathBuf::new();
         if durability == Durability::Synced {
             sync_parent_dir(&self.final_path);
@@ -131,7 +304,7 @@ impl Drop for AtomicFile {
     fn drop(&mut self) {
         if !self.tmp_path.as_os_str().is_empty() {
             self.file = None;
-            let _ = std::fs::remove_file(&self.tmp_path);
+            remove_temp(&self.tmp_path);
         }
     }
 }
@@ -145,12 +318,57 @@ pub fn write(path: &Path, bytes: &[u8], durability: Durability) -> Result<()> {
     f.commit_with(durability)
 }
 
-/// Rename the finished directory `tmp` to `path` and sync the parent, so that a directory
-/// (a store) appears under its name only when complete.
-pub fn commit_dir(tmp: &Path, path: &Path) -> Result<()> {
-    std::fs::rename(tmp, path).with_path(path)?;
-    sync_parent_dir(path);
-    Ok(())
+/// A directory built under the temporary sibling name `.NAME.tmp-<pid>` and renamed to its
+/// final name when complete (a store); removed when dropped without [`TempDir::commit`].
+#[derive(Debug)]
+pub struct TempDir {
+    tmp: Option<PathBuf>,
+}
+
+impl TempDir {
+    /// Create the temporary directory for `path`, replacing a stale one of this process.
+    pub fn create(path: &Path) -> Result<TempDir> {
+        let name = path
+            .file_name()
+            .ok_or_else(|| Error::input(path, "output path has no file name"))?
+            .to_string_lossy()
+            .to_string();
+        let tmp = temp_name(&path.with_file_name(format!(".{name}")));
+        let mut t = live();
+        if t.closed {
+            return Err(Error::io(&tmp, interrupted(&tmp)));
+        }
+        remove_path(&tmp);
+        std::fs::create_dir(&tmp).with_path(&tmp)?;
+        t.paths.insert(tmp.clone());
+        Ok(TempDir { tmp: Some(tmp) })
+    }
+
+    /// The temporary directory.
+    pub fn path(&self) -> &Path {
+        self.tmp.as_deref().unwrap_or(Path::new(""))
+    }
+
+    /// Rename the finished directory to `path` and sync the parent, so that it appears under
+    /// its name only when complete.
+    pub fn commit(mut self, path: &Path) -> Result<()> {
+        if let Some(tmp) = self.tmp.take() {
+            if let Err(e) = rename_live(&tmp, path) {
+                self.tmp = Some(tmp);
+                return Err(e);
+            }
+            sync_parent_dir(path);
+        }
+        Ok(())
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        if let Some(p) = self.tmp.take() {
+            remove_temp(&p);
+        }
+    }
 }
 
 #[cfg(test)]
@@ -177,5 +395,35 @@ mod tests {
 
         write(&q, b"xyz", Durability::Renamed).unwrap();
         assert_eq!(std::fs::read(&q).unwrap(), b"xyz");
+    }
+
+    #[test]
+    fn stale_temps_of_dead_processes_go_and_others_stay() {
+        assert_eq!(temp_pid("m.ply.tmp-42", "m.ply"), Some(42));
+        assert_eq!(temp_pid("m.ply.tmp-42.faces", "m.ply"), Some(42));
+        assert_eq!(temp_pid("m.ply.tmp-x", "m.ply"), None);
+        assert_eq!(temp_pid("n.ply.tmp-42", "m.ply"), None);
+        let d = tempfile::tempdir().unwrap();
+        let out = d.path().join("m.ply");
+        // A pid above Linux's largest (2^22) belongs to no live process.
+        let dead = [
+            d.path().join("m.ply.tmp-99999999"),
+            d.path().join("m.ply.tmp-99999999.faces"),
+        ];
+        let live = d.path().join(format!("m.ply.tmp-{}", std::process::id()));
+        let other = d.path().join("n.ply.tmp-99999999");
+        for p in dead.iter().chain([&live, &other]) {
+            std::fs::write(p, b"x").unwrap();
+        }
+        let dir = d.path().join(".m.ply.tmp-99999999");
+        std::fs::create_dir(&dir).unwrap();
+        let mut removed = remove_stale_temps(&out, false);
+        removed.sort();
+        let mut want = vec![dead[0].clone(), dead[1].clone(), dir.clone()];
+        want.sort();
+        if Path::new("/proc/self").exists() {
+            assert_eq!(removed, want);
+        }
+        assert!(live.exists() && other.exists());
     }
 }

@@ -39,7 +39,7 @@ use std::fs::File;
 use std::io::{BufWriter, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 
-use super::atomic::{AtomicFile, with_suffix};
+use super::atomic::{self, AtomicFile, with_suffix};
 use crate::error::{Error, IoContext, Result};
 
 /// Size of each write buffer.
@@ -166,13 +166,7 @@ impl MeshPlyWriter {
             header_bytes: reserved_bytes(with_color, with_intensity),
         };
         // From here on, a failure drops `w`, which removes the temporary files.
-        let faces = File::options()
-            .read(true)
-            .write(true)
-            .create(true)
-            .truncate(true)
-            .open(&faces_path)
-            .with_path(&faces_path)?;
+        let faces = atomic::create_temp_file(&faces_path)?;
         w.faces_path = faces_path;
         w.faces = Some(BufWriter::with_capacity(BUF_BYTES, faces));
         // A valid header for an empty mesh holds the room until `finish`.
@@ -367,7 +361,7 @@ impl MeshPlyWriter {
             )));
         }
         atomic.commit()?;
-        let _ = std::fs::remove_file(&self.faces_path);
+        atomic::remove_temp(&self.faces_path);
         self.faces_path = PathBuf::new();
         Ok(MeshWriteStats {
             vertices: self.vertices,
@@ -384,7 +378,7 @@ impl Drop for MeshPlyWriter {
         self.out = None;
         self.faces = None;
         if !self.faces_path.as_os_str().is_empty() {
-            let _ = std::fs::remove_file(&self.faces_path);
+            atomic::remove_temp(&self.faces_path);
         }
     }
 }

@@ -6,7 +6,7 @@
 
 use std::path::{Path, PathBuf};
 
-use crate::error::{Error, Result};
+use crate::error::{Error, IoContext, Result};
 use crate::exec::Ctx;
 use crate::io::InputSpec;
 use crate::normals::{self, NormalParams};
@@ -109,12 +109,18 @@ pub fn open_or_ingest(
         StoreSource::Store(dir) => dir.clone(),
         StoreSource::Points(specs) => {
             let dir = work_dir.join(WORK_STORE);
-            if !(resume && dir.join(MANIFEST).exists()) {
-                if dir.exists() && !resume {
-                    return Err(Error::input(
-                        work_dir,
-                        "work directory holds another run's files; pass --resume to continue that run, or choose another --work-dir",
-                    ));
+            let complete = dir.join(MANIFEST).exists();
+            if !(resume && complete) {
+                if dir.exists() {
+                    if !resume {
+                        return Err(Error::input(
+                            work_dir,
+                            "work directory holds another run's files; pass --resume to continue that run, or choose another --work-dir",
+                        ));
+                    }
+                    // A store without its manifest is what a run killed while removing its
+                    // work directory leaves: nothing in it can be used.
+                    std::fs::remove_dir_all(&dir).with_path(&dir)?;
                 }
                 std::fs::create_dir_all(work_dir).map_err(|e| {
                     Error::input(work_dir, format!("cannot create the work directory: {e}"))

@@ -17,7 +17,7 @@ pub mod ingest;
 mod points;
 pub mod reconstruct;
 mod tiles;
-mod workdir;
+pub mod workdir;
 
 pub use global::global_solve;
 pub use reconstruct::{ReconParams, ReconStats, reconstruct};

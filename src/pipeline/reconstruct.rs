@@ -130,7 +130,7 @@ pub fn reconstruct(
         .share(Share::PointCache)
         .min(POINT_CACHE_MAX_BYTES);
     let mut src = PointSource::new(store, plan, point_cap);
-    let _cache_permit = ctx.budget.acquire(point_cap, "the store cell cache")?;
+    let _cache_permit = ctx.budget.acquire_now(point_cap, "the store cell cache")?;
     let leaves = leaf_pass(store, &plan, params, &mut coarse, &dirs, &mut src, ctx)?;
     let m = &store.manifest;
     let (with_color, with_intensity) = (m.attributes.color, m.attributes.intensity);
@@ -208,7 +208,7 @@ fn coarse_pass(store: &Store, plan: &Plan, ctx: &Ctx) -> Result<CoarsePass> {
     let cgrid = plan.coarse_grid();
     let permit = ctx
         .budget
-        .acquire(cgrid.scratch_bytes(), "the coarse global solve")?;
+        .acquire_now(cgrid.scratch_bytes(), "the coarse global solve")?;
     let stage = ctx.progress.stage("splat", Some(m.point_count), "points");
     let mut v = vec![[0f32; 3]; cgrid.len()];
     let mut occupied = BTreeSet::new();
@@ -223,7 +223,8 @@ fn coarse_pass(store: &Store, plan: &Plan, ctx: &Ctx) -> Result<CoarsePass> {
             .iter()
             .map(|&j| m.cells[j].count * BATCH_POINT_BYTES)
             .sum();
-        let _permit = ctx.budget.acquire(bytes, "a wave of store cells")?;
+        // The coarse grid's permit is held: admitted without waiting (see `tiles::admit_now`).
+        let _permit = tiles::admit_now(ctx, bytes);
         let batches: Vec<Result<PointBatch>> = ctx
             .pool
             .install(|| ids.par_iter().map(|&j| store.read_cell(j)).collect());

@@ -115,7 +115,9 @@ pub fn run(job: &TileJob, points: SharedPoints, out: &Path, ctx: &Ctx) -> Result
     let detail_cap = ctx.budget.share(Share::DetailCache);
     let mut gpu_totals = GpuTotals::default();
     let mut details = DetailCache::new(job.leaves_dir, plan.detail_n(), detail_cap);
-    let _detail_permit = ctx.budget.acquire(detail_cap, "the leaf detail cache")?;
+    let _detail_permit = ctx
+        .budget
+        .acquire_now(detail_cap, "the leaf detail cache")?;
     let stage = ctx.progress.stage("tiles", Some(tiles_total), "tiles");
     let sizes = WaveSizes {
         tiles: 2 * ctx.threads(),

@@ -1,26 +1,326 @@
-//! The work directory of a reconstruction: its run description (`run.json`), leaf checkpoints
-//! (`leaves/`) and tile checkpoints (`tiles/`). A run refuses another run's files unless it
-//! resumes the same run (same version, inputs and options).
+//! The work directory of a reconstruction, and who owns it.
+//!
+//! A work directory holds the store ingested from point files (`store/`), the leaf and tile
+//! checkpoints (`leaves/`, `tiles/`), the run's identity (`run.json`) and its plan
+//! (`solve.json`). scanflow removes only what it created and marked as its own:
+//!
+//! - A work directory scanflow creates gets a marker file ([`MARKER`]) before anything else.
+//! - An existing directory without the marker (a scratch directory, the directory holding the
+//!   inputs, the one receiving the output) is never used as the work directory itself: the
+//!   run works in a subdirectory it creates inside, named after the output
+//!   ([`resolve`]), and never removes the directory the user named.
+//! - On success the run removes the entries it knows (marker, run description, store,
+//!   checkpoints) and then the directory only if that left it empty; anything else found in
+//!   it stays, with a warning.
+//!
+//! **Resume identity.** `run.json` records the version, every input's canonical path, size,
+//! modification time and a content fingerprint, and every option that changes the output's
+//! bytes. `--resume` compares it with the run being started and refuses, naming what differs,
+//! before anything in the directory is used. The fingerprint is the CRC-32 of the size and of
+//! [`FINGERPRINT_WINDOWS`] windows of [`FINGERPRINT_WINDOW_BYTES`] spread evenly over the
+//! file, first and last included: a change that keeps the size, the modification time and
+//! every sampled byte is not seen, but the check costs the same 1 MiB read for a
+//! hundred-gigabyte scan as for a small one, at the start and at every resume.
 
+use std::collections::BTreeMap;
+use std::fs::File;
+use std::io::{Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
+use super::ingest::{StoreSource, WORK_STORE};
 use super::reconstruct::ReconParams;
 use crate::error::{Error, IoContext, Result};
 use crate::io::atomic::{self, Durability};
+use crate::normals::{NormalParams, NormalsMode};
 use crate::recon::Plan;
 use crate::store::Store;
+use crate::store::manifest::MANIFEST;
 
-/// What a work directory was made for; a resumed run must match it.
+/// The file that marks a directory as a scanflow work directory, created first.
+pub const MARKER: &str = ".scanflow-work";
+
+/// The run's identity: inputs, options and version.
+const RUN_FILE: &str = "run.json";
+
+/// The plan and the store the checkpoints were made with.
+const SOLVE_FILE: &str = "solve.json";
+
+/// Leaf checkpoints.
+const LEAVES: &str = "leaves";
+
+/// Tile checkpoints.
+const TILES: &str = "tiles";
+
+/// Windows read for an input's fingerprint.
+const FINGERPRINT_WINDOWS: u64 = 16;
+
+/// Bytes per fingerprint window.
+const FINGERPRINT_WINDOW_BYTES: u64 = 64 << 10;
+
+/// How many differences a refused resume lists.
+const DIFFS_SHOWN: usize = 4;
+
+/// The work directory a run uses when `requested` is named: `requested` itself when it does
+/// not exist yet or is a scanflow work directory; inside an existing directory of someone
+/// else's, a subdirectory named after the output (`OUTPUT-NAME.work`). An existing
+/// non-directory is refused.
+pub fn resolve(requested: &Path, output: &Path) -> Result<PathBuf> {
+    match std::fs::symlink_metadata(requested) {
+        Err(_) => Ok(requested.to_path_buf()),
+        Ok(m) if !m.is_dir() => Err(Error::input(
+            requested,
+            "--work-dir exists and is not a directory",
+        )),
+        Ok(_) if requested.join(MARKER).exists() => Ok(requested.to_path_buf()),
+        Ok(_) => {
+            let name = output
+                .file_name()
+                .ok_or_else(|| Error::Usage(format!("-o {}: no file name", output.display())))?;
+            Ok(requested.join(atomic::with_suffix(Path::new(name), ".work")))
+        }
+    }
+}
+
+/// Whether `dir` is a work directory scanflow made.
+pub fn is_work_dir(dir: &Path) -> bool {
+    dir.join(MARKER).is_file()
+}
+
+/// What a run is made of: inputs, options and version, as `name → value` pairs.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct RunIdentity {
+    entries: BTreeMap<String, String>,
+}
+
+impl RunIdentity {
+    /// The identity of reconstructing `source` with these options; reads each input's
+    /// fingerprint (see the [module docs](self)).
+    pub fn new(
+        source: &StoreSource,
+        normals: NormalsMode,
+        normal_params: &NormalParams,
+        params: &ReconParams,
+    ) -> Result<RunIdentity> {
+        let mut e = BTreeMap::new();
+        let mut put = |k: &str, v: String| e.insert(k.to_string(), v);
+        put("scanflow", env!("CARGO_PKG_VERSION").to_string());
+        put("--depth", params.depth.to_string());
+        put("--smooth", params.sigma_vox.to_string());
+        put("--error", params.error.to_string());
+        put("--min-points", params.min_points.to_string());
+        put("--trim", params.trim.to_string());
+        put("--no-fit", (!params.fit).to_string());
+        match source {
+            StoreSource::Store(dir) => {
+                let manifest = dir.join(MANIFEST);
+                put("store", canonical(dir)?);
+                put("store manifest", file_identity(&manifest)?);
+            }
+            StoreSource::Points(specs) => {
+                put("--normals", format!("{normals:?}"));
+                put("--neighbours", normal_params.k.to_string());
+                put("--robust-normals", normal_params.robust.to_string());
+                put("--fixed-neighbours", (!normal_params.adaptive).to_string());
+                for (i, s) in specs.iter().enumerate() {
+                    let n = i + 1;
+                    put(&format!("input {n}"), canonical(&s.path)?);
+                    put(&format!("input {n} content"), file_identity(&s.path)?);
+                    put(&format!("input {n} pose"), format!("{:?}", s.transform));
+                    put(
+                        &format!("input {n} viewpoint"),
+                        format!("{:?}", s.viewpoint),
+                    );
+                }
+            }
+        }
+        Ok(RunIdentity { entries: e })
+    }
+
+    /// What differs from `other` (this run's value second), at most [`DIFFS_SHOWN`] items.
+    fn differences(&self, now: &RunIdentity) -> Vec<String> {
+        let keys: std::collections::BTreeSet<&String> =
+            self.entries.keys().chain(now.entries.keys()).collect();
+        let none = String::from("(none)");
+        keys.into_iter()
+            .filter_map(|k| {
+                let (a, b) = (
+                    self.entries.get(k).unwrap_or(&none),
+                    now.entries.get(k).unwrap_or(&none),
+                );
+                (a != b).then(|| format!("{k}: {a} then, {b} now"))
+            })
+            .take(DIFFS_SHOWN)
+            .collect()
+    }
+}
+
+/// `path` made absolute with symbolic links resolved, as text.
+fn canonical(path: &Path) -> Result<String> {
+    Ok(std::fs::canonicalize(path)
+        .with_path(path)?
+        .to_string_lossy()
+        .into_owned())
+}
+
+/// Size, modification time and fingerprint of the file `path`, as text.
+fn file_identity(path: &Path) -> Result<String> {
+    let meta = std::fs::metadata(path).with_path(path)?;
+    let modified = meta
+        .modified()
+        .ok()
+        .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
+        .map(|d| d.as_nanos())
+        .unwrap_or(0);
+    let len = meta.len();
+    Ok(format!(
+        "{len} bytes, modified {modified} ns, fingerprint {:08x}",
+        fingerprint(path, len)?
+    ))
+}
+
+/// The CRC-32 of `len` and of evenly spread windows of the file (see the module docs).
+fn fingerprint(path: &Path, len: u64) -> Result<u32> {
+    let mut f = File::open(path).with_path(path)?;
+    let mut h = crc32fast::Hasher::new();
+    h.update(&len.to_le_bytes());
+    let window = FINGERPRINT_WINDOW_BYTES.min(len);
+    let mut buf = vec![0u8; window as usize];
+    let span = len - window;
+    let mut last = None;
+    for i in 0..FINGERPRINT_WINDOWS {
+        let at = span * i / (FINGERPRINT_WINDOWS - 1);
+        if last == Some(at) {
+            continue;
+        }
+        last = Some(at);
+        f.seek(SeekFrom::Start(at)).with_path(path)?;
+        f.read_exact(&mut buf).with_path(path)?;
+        h.update(&buf);
+    }
+    Ok(h.finalize())
+}
+
+/// A work directory held by this run; see the [module docs](self).
+#[derive(Debug)]
+pub struct Lease {
+    dir: PathBuf,
+}
+
+/// Take the work directory `dir` (from [`resolve`]) for the run `identity`: create and mark
+/// it, or, when it holds an earlier run, refuse unless `resume` and the identities match.
+/// Stale temporary files that killed runs left in it are removed.
+pub fn claim(dir: &Path, identity: &RunIdentity, resume: bool) -> Result<Lease> {
+    let run_file = dir.join(RUN_FILE);
+    if is_work_dir(dir) {
+        let old: Option<RunIdentity> = std::fs::read_to_string(&run_file)
+            .ok()
+            .and_then(|t| serde_json::from_str(&t).ok());
+        match old {
+            Some(_) if !resume => {
+                return Err(Error::input(
+                    dir,
+                    "work directory holds another run's files; pass --resume to continue that run, or choose another --work-dir",
+                ));
+            }
+            Some(old) if old != *identity => {
+                return Err(Error::input(
+                    dir,
+                    format!(
+                        "cannot resume: the work directory was made for another run ({})",
+                        old.differences(identity).join("; ")
+                    ),
+                ));
+            }
+            _ => {}
+        }
+        atomic::remove_stale_temps(dir, true);
+    } else {
+        let parent = dir.parent().filter(|p| !p.as_os_str().is_empty());
+        if let Some(p) = parent.filter(|p| !p.is_dir()) {
+            return Err(Error::input(
+                dir,
+                format!(
+                    "cannot create the work directory: {} is not a directory",
+                    p.display()
+                ),
+            ));
+        }
+        atomic::remove_stale_temps(dir, false);
+        std::fs::create_dir(dir)
+            .map_err(|e| Error::input(dir, format!("cannot create the work directory: {e}")))?;
+        atomic::write(
+            &dir.join(MARKER),
+            b"scanflow work directory: scanflow removes it when the run succeeds\n",
+            Durability::Synced,
+        )?;
+    }
+    if !run_file.exists() {
+        let text = serde_json::to_string_pretty(identity)
+            .map_err(|e| Error::Internal(format!("{RUN_FILE}: {e}")))?;
+        atomic::write(&run_file, text.as_bytes(), Durability::Synced)?;
+    }
+    Ok(Lease {
+        dir: dir.to_path_buf(),
+    })
+}
+
+impl Lease {
+    /// The work directory.
+    pub fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    /// Whether a resume could reuse anything: a complete store or a leaf checkpoint.
+    pub fn has_checkpoints(&self) -> bool {
+        self.dir.join(WORK_STORE).join(MANIFEST).exists()
+            || std::fs::read_dir(self.dir.join(LEAVES))
+                .map(|mut d| d.next().is_some())
+                .unwrap_or(false)
+    }
+
+    /// Remove what scanflow put in the work directory, then the directory if that emptied
+    /// it. Returns the entries left (someone else's), which keep the directory.
+    pub fn remove(self) -> Result<Vec<PathBuf>> {
+        remove_owned(&self.dir)
+    }
+}
+
+/// Remove the entries scanflow makes in the work directory `dir` (if it is one) and then
+/// `dir` if that emptied it; return the entries it did not make, which stay.
+pub fn remove_owned(dir: &Path) -> Result<Vec<PathBuf>> {
+    if !is_work_dir(dir) {
+        return Ok(Vec::new());
+    }
+    atomic::remove_stale_temps(dir, true);
+    for name in [WORK_STORE, LEAVES, TILES] {
+        let p = dir.join(name);
+        if p.is_dir() {
+            std::fs::remove_dir_all(&p).with_path(&p)?;
+        }
+    }
+    for name in [RUN_FILE, SOLVE_FILE, MARKER] {
+        let p = dir.join(name);
+        if p.exists() {
+            std::fs::remove_file(&p).with_path(&p)?;
+        }
+    }
+    let left: Vec<PathBuf> = std::fs::read_dir(dir)
+        .with_path(dir)?
+        .flatten()
+        .map(|e| e.path())
+        .collect();
+    if left.is_empty() {
+        std::fs::remove_dir(dir).with_path(dir)?;
+    }
+    Ok(left)
+}
+
+/// The plan and store the checkpoints in a work directory were made with; a resumed run must
+/// match it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-struct RunInfo {
-    scanflow: String,
-    trim: bool,
-    #[serde(default)]
-    fit: bool,
-    error: f64,
-    min_points: u64,
+struct SolveInfo {
     store_points: u64,
     store_cells_crc: Vec<u32>,
     plan: Plan,
@@ -35,52 +335,99 @@ pub struct WorkDir {
     pub tiles: PathBuf,
 }
 
-/// Make `params.work_dir` ready for a run of `plan` on `store`: write its run description, or
-/// check that it describes this run when resuming; refuse another run's files.
+/// Make `params.work_dir` ready for the solve of `plan` on `store`: record the plan; when the
+/// checkpoints there were made with another plan or store (a resume with another `--mem` or
+/// `--tile`), drop them, as no leaf of theirs fits this plan.
 pub fn prepare(store: &Store, plan: &Plan, params: &ReconParams) -> Result<WorkDir> {
     let m = &store.manifest;
-    let leaves = params.work_dir.join("leaves");
-    let info = RunInfo {
-        scanflow: env!("CARGO_PKG_VERSION").into(),
-        trim: params.trim,
-        fit: params.fit,
-        error: params.error,
-        min_points: params.min_points,
+    let info = SolveInfo {
         store_points: m.point_count,
         store_cells_crc: m.cells.iter().map(|c| c.crc32).collect(),
         plan: *plan,
     };
-    let info_path = params.work_dir.join("run.json");
-    if info_path.exists() {
-        check_resumable(&info_path, &info, params)?;
-    } else {
-        std::fs::create_dir_all(&leaves).with_path(&leaves)?;
+    let dir = &params.work_dir;
+    if !dir.is_dir() {
+        std::fs::create_dir_all(dir).with_path(dir)?;
+    }
+    let info_path = dir.join(SOLVE_FILE);
+    let old: Option<SolveInfo> = std::fs::read_to_string(&info_path)
+        .ok()
+        .and_then(|t| serde_json::from_str(&t).ok());
+    if old.as_ref() != Some(&info) {
+        if old.is_some() {
+            log::info!(
+                "{}: the checkpoints there were made with another plan (--mem and --tile change it): solving the leaves again",
+                dir.display()
+            );
+            for name in [LEAVES, TILES] {
+                let p = dir.join(name);
+                if p.is_dir() {
+                    std::fs::remove_dir_all(&p).with_path(&p)?;
+                }
+            }
+        }
         let text = serde_json::to_string_pretty(&info)
-            .map_err(|e| Error::Internal(format!("run.json: {e}")))?;
+            .map_err(|e| Error::Internal(format!("{SOLVE_FILE}: {e}")))?;
         atomic::write(&info_path, text.as_bytes(), Durability::Synced)?;
     }
+    let leaves = dir.join(LEAVES);
     std::fs::create_dir_all(&leaves).with_path(&leaves)?;
-    let tiles = params.work_dir.join("tiles");
+    let tiles = dir.join(TILES);
     std::fs::create_dir_all(&tiles).with_path(&tiles)?;
     Ok(WorkDir { leaves, tiles })
 }
 
-/// Refuse the existing run description at `info_path` unless resuming the run `info`.
-fn check_resumable(info_path: &Path, info: &RunInfo, params: &ReconParams) -> Result<()> {
-    let old: Option<RunInfo> = std::fs::read_to_string(info_path)
-        .ok()
-        .and_then(|t| serde_json::from_str(&t).ok());
-    if !params.resume {
-        return Err(Error::input(
-            &params.work_dir,
-            "work directory holds another run's files; pass --resume to continue that run, or choose another --work-dir",
-        ));
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fingerprint_sees_a_changed_byte_in_a_window_and_the_size() {
+        let d = tempfile::tempdir().unwrap();
+        let p = d.path().join("a.bin");
+        let mut bytes: Vec<u8> = (0..300_000u32).map(|i| (i % 251) as u8).collect();
+        std::fs::write(&p, &bytes).unwrap();
+        let a = fingerprint(&p, bytes.len() as u64).unwrap();
+        let last = bytes.len() - 1;
+        bytes[last] ^= 1;
+        std::fs::write(&p, &bytes).unwrap();
+        let b = fingerprint(&p, bytes.len() as u64).unwrap();
+        assert_ne!(a, b);
+        std::fs::write(&p, b"xyz").unwrap();
+        assert_ne!(fingerprint(&p, 3).unwrap(), b);
+        std::fs::write(&p, b"").unwrap();
+        fingerprint(&p, 0).unwrap();
     }
-    if old.as_ref() != Some(info) {
-        return Err(Error::input(
-            &params.work_dir,
-            "cannot resume: the work directory was made for other inputs or options",
-        ));
+
+    #[test]
+    fn a_foreign_directory_is_never_the_work_directory() {
+        let d = tempfile::tempdir().unwrap();
+        let out = d.path().join("m.ply");
+        let fresh = d.path().join("w");
+        assert_eq!(resolve(&fresh, &out).unwrap(), fresh);
+        std::fs::create_dir(&fresh).unwrap();
+        assert_eq!(resolve(&fresh, &out).unwrap(), fresh.join("m.ply.work"));
+        std::fs::write(fresh.join(MARKER), b"").unwrap();
+        assert_eq!(resolve(&fresh, &out).unwrap(), fresh);
+        let file = d.path().join("f");
+        std::fs::write(&file, b"").unwrap();
+        assert!(resolve(&file, &out).is_err());
     }
-    Ok(())
+
+    #[test]
+    fn removal_keeps_what_scanflow_did_not_make() {
+        let d = tempfile::tempdir().unwrap();
+        let w = d.path().join("w");
+        let id = RunIdentity {
+            entries: BTreeMap::new(),
+        };
+        let lease = claim(&w, &id, false).unwrap();
+        std::fs::create_dir_all(w.join(LEAVES)).unwrap();
+        std::fs::write(w.join(LEAVES).join("x"), b"1").unwrap();
+        std::fs::write(w.join("mine.txt"), b"user").unwrap();
+        let left = lease.remove().unwrap();
+        assert_eq!(left, vec![w.join("mine.txt")]);
+        assert_eq!(std::fs::read(w.join("mine.txt")).unwrap(), b"user");
+        assert!(!w.join(LEAVES).exists() && !w.join(MARKER).exists());
+    }
 }

@@ -199,63 +199,32 @@ impl Sizes {
     }
 }
 
-/// The temporary directory a store is built in, removed unless committed.
-struct TempDir(Option<PathBuf>);
+/// The temporary directory a store is built in (`.NAME.tmp-<pid>`), removed unless committed.
+struct TempDir(atomic::TempDir);
 
 impl TempDir {
-    /// A fresh `.NAME.tmp-<pid>` next to `out`, with its `cells/` directory.
+    /// A fresh temporary directory next to `out`, with its `cells/` directory.
     fn create(out: &Path) -> Result<TempDir> {
-        let parent = match out.parent() {
-            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-            _ => PathBuf::from("."),
-        };
-        let name = out
-            .file_name()
-            .ok_or_else(|| Error::input(out, "output path has no file name"))?
-            .to_string_lossy()
-            .to_string();
-        let tmp = atomic::temp_name(&parent.join(format!(".{name}")));
-        if tmp.exists() {
-            std::fs::remove_dir_all(&tmp).with_path(&tmp)?;
-        }
-        std::fs::create_dir(&tmp).map_err(|e| {
-            Error::input(
-                out,
-                format!(
-                    "cannot create the store: directory {} is not writable ({e})",
-                    parent.display()
-                ),
-            )
-        })?;
-        let guard = TempDir(Some(tmp.clone()));
-        let cells = tmp.join(CELLS_DIR);
+        let tmp = atomic::TempDir::create(out)
+            .map_err(|e| Error::input(out, format!("cannot create the store: {e}")))?;
+        let cells = tmp.path().join(CELLS_DIR);
         std::fs::create_dir(&cells).with_path(&cells)?;
-        Ok(guard)
+        Ok(TempDir(tmp))
     }
 
     fn path(&self) -> &Path {
-        self.0.as_deref().unwrap_or(Path::new(""))
+        self.0.path()
     }
 
     /// Rename the directory to `out`, unless something appeared there meanwhile.
-    fn commit(mut self, out: &Path) -> Result<()> {
+    fn commit(self, out: &Path) -> Result<()> {
         if out.exists() {
             return Err(Error::input(
                 out,
                 "output store appeared while ingesting; not replaced",
             ));
         }
-        atomic::commit_dir(self.path(), out)?;
-        self.0 = None;
-        Ok(())
-    }
-}
-
-impl Drop for TempDir {
-    fn drop(&mut self) {
-        if let Some(p) = self.0.take() {
-            let _ = std::fs::remove_dir_all(p);
-        }
+        self.0.commit(out)
     }
 }
 

@@ -20,22 +20,22 @@ fn scan(dir: &std::path::Path) -> std::path::PathBuf {
 }
 
 #[test]
-fn bad_choice_values_fail_with_status_1() {
+fn bad_choice_values_are_usage_errors_with_status_2() {
     let d = tempfile::tempdir().unwrap();
     let ply = scan(d.path());
     let out = d.path().join("o.ply");
     let r = ["reconstruct", s(&ply), "-o", s(&out)];
-    let err = fails(&[&r[..], &["--gpu", "yes"]].concat());
+    let err = usage(&[&r[..], &["--gpu", "yes"]].concat());
     assert!(
         err.contains("--gpu \"yes\": expected one of auto, on, off"),
         "{err}"
     );
-    let err = fails(&[&r[..], &["--progress", "loud"]].concat());
+    let err = usage(&[&r[..], &["--progress", "loud"]].concat());
     assert!(
         err.contains("--progress \"loud\": expected auto, bars, json or none"),
         "{err}"
     );
-    let err = fails(&[&r[..], &["--normals", "maybe"]].concat());
+    let err = usage(&[&r[..], &["--normals", "maybe"]].concat());
     assert!(err.contains("auto, use or estimate"), "{err}");
     // Shapes ignore ASCII case, as they always did.
     let o = ok(&[
@@ -68,13 +68,13 @@ fn options_are_checked_before_any_work() {
         ),
         (&["--mem", "lots"][..], "--mem \"lots\""),
     ] {
-        let err = fails(&[&r[..], bad].concat());
+        let err = usage(&[&r[..], bad].concat());
         assert!(err.contains(want), "{bad:?}: {err}");
         assert!(!work.exists(), "{bad:?}: the work directory was made");
         assert!(!out.exists(), "{bad:?}: an output appeared");
     }
     let st = d.path().join("s.store");
-    let err = fails(&["ingest", s(&ply), "-o", s(&st), "--zstd-level", "20"]);
+    let err = usage(&["ingest", s(&ply), "-o", s(&st), "--zstd-level", "20"]);
     assert!(err.contains("--zstd-level 20: expected -7 ..= 19"), "{err}");
     assert!(!st.exists());
 }

@@ -42,6 +42,16 @@ pub fn fails(args: &[&str]) -> String {
     err
 }
 
+/// Run, require a usage failure (exit 2: the command line is wrong; no panic), return stderr.
+pub fn usage(args: &[&str]) -> String {
+    let o = run(args);
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert_eq!(o.status.code(), Some(2), "scanflow {args:?}:\n{err}");
+    assert!(!err.contains("panicked"), "{err}");
+    assert!(err.contains("scanflow: error:"), "{err}");
+    err
+}
+
 /// Path to shared test data, or None (with a printed reason) when absent.
 pub fn shared(rel: &str) -> Option<PathBuf> {
     let p = Path::new(env!("CARGO_MANIFEST_DIR"))

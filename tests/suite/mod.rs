@@ -5,4 +5,5 @@ mod common;
 mod data;
 mod ingest;
 mod normals;
+mod ownership;
 mod recon;

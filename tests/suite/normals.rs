@@ -184,7 +184,7 @@ fn normals_mode_use_and_estimate() {
         let x = d.path().join("x");
         let mut args = vec!["ingest", s(&ply), "-o", s(&x)];
         args.extend_from_slice(extra);
-        fails(&args)
+        usage(&args)
     };
     let err = bad(&["--normals", "maybe"]);
     assert!(
