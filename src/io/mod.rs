@@ -76,6 +76,12 @@ impl Format {
             Format::Xyz => "XYZ text",
         }
     }
+
+    /// LAS or LAZ: the same point records, uncompressed or LASzip-compressed. Every rule keyed
+    /// on LAS (normals face up without a viewpoint, 8-bit colour scaling) covers both.
+    pub fn is_las(self) -> bool {
+        matches!(self, Format::Las | Format::Laz)
+    }
 }
 
 /// A contiguous run of points of one file, read by one worker.
