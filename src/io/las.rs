@@ -201,6 +201,7 @@ impl LasReader {
     /// Open a LAS or LAZ file: read and check its header and, for uncompressed files, that
     /// the file is long enough for every point record the header declares.
     pub fn open(path: &Path) -> Result<LasReader> {
+        crate::io::regular_file(path, "a LAS or LAZ file")?;
         let mut file = File::open(path).with_path(path)?;
         let file_len = file.metadata().with_path(path)?.len();
         check_signature(&mut file, path)?;
