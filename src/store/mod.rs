@@ -44,6 +44,7 @@ pub mod manifest;
 pub mod octree;
 pub mod scatter;
 pub mod split;
+pub mod verify;
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -522,7 +523,8 @@ pub struct Store {
 }
 
 impl Store {
-    /// Open a store and check its manifest.
+    /// Open a store and check its manifest and that its cell files are there, each a regular
+    /// file of the listed size ([`verify`]); reads no cell.
     pub fn open(dir: &Path) -> Result<Store> {
         let manifest = Manifest::load(dir)?;
         let layout = RecordLayout::new(manifest.attributes, manifest.position_f32);
@@ -535,11 +537,14 @@ impl Store {
                 ),
             ));
         }
-        Ok(Store {
+        verify::check_manifest(dir, &manifest)?;
+        let store = Store {
             dir: dir.to_path_buf(),
             manifest,
             layout,
-        })
+        };
+        verify::check_cell_files(&store)?;
+        Ok(store)
     }
 
     /// The file of cell `i`.

@@ -6,3 +6,4 @@ mod data;
 mod ingest;
 mod normals;
 mod recon;
+mod store_verify;
