@@ -2,6 +2,7 @@ mod bad_input;
 mod cli;
 mod colour;
 mod common;
+mod corpus;
 mod data;
 mod ingest;
 mod normals;
