@@ -8,7 +8,9 @@
 //!
 //! # Module map
 //!
-//! Readers ([`open`] picks one by content and extension):
+//! Readers ([`open`] picks one by content and extension; each first checks, from the file's
+//! type alone, that its path is a regular file ([`regular_file`]), so a directory, FIFO or
+//! device is named as such and a FIFO is never opened, which would block):
 //!
 //! * [`ply`]: PLY points, ascii and binary (`header.rs` the header, `decode.rs` the records);
 //! * [`las`]: LAS and LAZ;

@@ -30,6 +30,10 @@
 //! the directory, so a store is either complete or absent. Between the two, the cells of a
 //! staged store may be rewritten (with estimated normals, by the pipeline).
 //!
+//! **Checks.** [`Store::open`] trusts no manifest: it refuses one that lists a cell twice,
+//! names a file outside `cells/` or miscounts, and cell files that are missing, linked or
+//! resized ([`verify`]); reading a cell checks its record count and CRC-32.
+//!
 //! **Memory.** The counting grid ([`Share::CountingGrid`]), the chunks in flight
 //! ([`Share::IngestChunks`], [`CHUNK_BYTES_PER_POINT`] a point) and the cell buffers
 //! ([`Share::ScatterBuffers`]) are each admitted by the budget before they are allocated;

@@ -5,6 +5,7 @@ mod common;
 mod corpus;
 mod data;
 mod ingest;
+mod input_kinds;
 mod normals;
 mod recon;
 mod store_verify;
