@@ -4,12 +4,14 @@
 //! A store is trusted only as far as it is checked, since a manifest is a file a user (or a
 //! damaged disk) can change. Opening a store checks, without reading a cell:
 //!
-//! * **the manifest** ([`check_manifest`]): every cell listed once (keys and file names
+//! * **the manifest** ([`check_manifest`]): zstd compression and the record fields its
+//!   attributes make; every cell listed once (keys and file names
 //!   unique, in strictly increasing key order); each key a valid octree key whose level and
 //!   coordinates are the entry's; each file name exactly the one ingest gives the key
 //!   (`<key in hex>.zst`), so no entry can name a path outside the store's `cells/`
-//!   directory (`../../etc/passwd`, an absolute path); every cell non-empty; the cells'
-//!   counts summing to `point_count`, and the inputs' points to `point_count` plus
+//!   directory (`../../etc/passwd`, an absolute path); every cell non-empty, with no more
+//!   points than its file could decompress to (zstd expands a byte to at most 2^17); the
+//!   cells' counts summing to `point_count`, and the inputs' points to `point_count` plus
 //!   `skipped_invalid`;
 //! * **the files** ([`check_cell_files`]): `cells/` a directory and every cell file a regular
 //!   file (not a symbolic link, which could lead out of the store) of the manifest's size.
@@ -26,10 +28,13 @@ use rayon::prelude::*;
 use crate::error::{Error, Result};
 use crate::exec::Ctx;
 use crate::store::cell_file::CellReader;
-use crate::store::manifest::{MANIFEST, Manifest};
+use crate::store::manifest::{MANIFEST, Manifest, record_fields};
 use crate::store::{CELLS_DIR, Store};
 use crate::types::keys::MAX_LEVEL;
 use crate::types::{CellKey, PointBatch};
+
+/// Most bytes a cell file's one byte can decompress to (see [`check_manifest`]).
+const MAX_ZSTD_RATIO: u64 = 1 << 17;
 
 /// Records decoded at a time while verifying a cell: 64 Ki records, a few MiB of buffer.
 const VERIFY_RECORDS: usize = 1 << 16;
@@ -56,6 +61,23 @@ fn bad_key(key: CellKey) -> Option<String> {
 
 /// Check the manifest of the store at `dir` for what no ingest writes: see the module docs.
 pub fn check_manifest(dir: &Path, m: &Manifest) -> Result<()> {
+    let manifest = dir.join(MANIFEST);
+    if m.compression != "zstd" {
+        return Err(Error::input(
+            &manifest,
+            format!("compression \"{}\", expected \"zstd\"", m.compression),
+        ));
+    }
+    let fields = record_fields(m.attributes, m.position_f32);
+    if m.record_fields != fields {
+        return Err(Error::input(
+            &manifest,
+            format!(
+                "record_fields {:?} do not match the attributes, which make {fields:?}",
+                m.record_fields
+            ),
+        ));
+    }
     let mut keys: HashMap<CellKey, usize> = HashMap::with_capacity(m.cells.len());
     let mut files: HashMap<&str, usize> = HashMap::with_capacity(m.cells.len());
     let mut sum: u128 = 0;
@@ -125,9 +147,22 @@ pub fn check_manifest(dir: &Path, m: &Manifest) -> Result<()> {
                 "0 points (a store lists only non-empty cells)",
             ));
         }
+        // A zstd block of 128 KiB of one repeated byte compresses to 4 bytes (2^15 times
+        // smaller), so no cell file decompresses to more than 2^17 times its size.
+        let most = c.bytes.saturating_mul(MAX_ZSTD_RATIO) / m.record_bytes.max(1) as u64;
+        if c.count > most {
+            return Err(cell_err(
+                dir,
+                i,
+                file,
+                format!(
+                    "{} points cannot be in a cell file of {} bytes (at most {most})",
+                    c.count, c.bytes
+                ),
+            ));
+        }
         sum += u128::from(c.count);
     }
-    let manifest = dir.join(MANIFEST);
     if sum != u128::from(m.point_count) {
         return Err(Error::input(
             manifest,

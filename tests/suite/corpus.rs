@@ -932,6 +932,37 @@ fn store_cases(c: &mut Corpus) {
     );
     store(
         c,
+        "store_huge_cell_count",
+        Reconstruct,
+        CELL,
+        &edit(|m| {
+            // Counts, total and inputs forged to agree on far more points than the file holds.
+            let huge = 1u64 << 62;
+            let a = m["cells"][0]["count"].as_u64().unwrap();
+            let n = m["point_count"].as_u64().unwrap() - a + huge;
+            m["cells"][0]["count"] = huge.into();
+            m["point_count"] = n.into();
+            m["inputs"][0]["points"] = (n + m["skipped_invalid"].as_u64().unwrap()).into();
+        }),
+    );
+    store(
+        c,
+        "store_bad_compression",
+        Info,
+        NONE,
+        &edit(|m| m["compression"] = "lz4".into()),
+    );
+    store(
+        c,
+        "store_bad_record_fields",
+        Info,
+        NONE,
+        &edit(|m| {
+            m["record_fields"][0] = "x:f16".into();
+        }),
+    );
+    store(
+        c,
         "store_unsorted_cells",
         Info,
         CELL,
