@@ -793,6 +793,18 @@ fn special_cases(c: &mut Corpus) {
         c.add("fifo_ingest", Ingest, &fifo, NONE);
         c.add("fifo_reconstruct", Reconstruct, &fifo, NONE);
         c.add("fifo_info", Info, &fifo, NONE);
+        let d2 = c.dir("fifo_check");
+        c.cases.push(Case {
+            name: "fifo_check".into(),
+            args: ["check", s(&fifo), "--reference", s(&fifo)]
+                .map(String::from)
+                .to_vec(),
+            file: "pipe.ply".into(),
+            loc: NONE,
+            out: None,
+            pending: None,
+            dir: d2,
+        });
         let fifo_xyz = d.join("pipe.xyz");
         if matches!(Command::new("mkfifo").arg(&fifo_xyz).status(), Ok(s) if s.success()) {
             c.add("fifo_xyz_ingest", Ingest, &fifo_xyz, NONE);
@@ -1057,6 +1069,17 @@ fn store_cases(c: &mut Corpus) {
     store(c, "store_missing_manifest", Info, NONE, &|st: &Path| {
         std::fs::remove_file(st.join("manifest.json")).unwrap();
         st.to_path_buf()
+    });
+    #[cfg(unix)]
+    store(c, "store_fifo_manifest", Info, NONE, &|st: &Path| {
+        let m = st.join("manifest.json");
+        std::fs::remove_file(&m).unwrap();
+        // A FIFO (reading it would block), or a directory where mkfifo is missing.
+        let made = Command::new("mkfifo").arg(&m).status();
+        if !matches!(made, Ok(s) if s.success()) {
+            std::fs::create_dir(&m).unwrap();
+        }
+        m
     });
     store(c, "store_missing_cells_dir", Info, NONE, &|st: &Path| {
         std::fs::remove_dir_all(st.join("cells")).unwrap();
