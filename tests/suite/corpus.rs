@@ -186,7 +186,8 @@ fn junk(n: usize, seed: u64) -> Vec<u8> {
 const XYZ: [&str; 3] = ["x", "y", "z"];
 const XYZN: [&str; 6] = ["x", "y", "z", "nx", "ny", "nz"];
 
-fn ply_cases(c: &mut Corpus) {
+/// PLY headers.
+fn ply_header_cases(c: &mut Corpus) {
     use Cmd::*;
     let good3 = "0 0 0\n1 0 0\n0 1 0\n";
     c.file("ply_empty", "empty.ply", b"", Ingest, NONE);
@@ -265,6 +266,12 @@ fn ply_cases(c: &mut Corpus) {
         Ingest,
         ANY_LOC,
     );
+}
+
+/// PLY data: counts, values and records.
+fn ply_data_cases(c: &mut Corpus) {
+    use Cmd::*;
+    let good3 = "0 0 0\n1 0 0\n0 1 0\n";
     let b = binary_ply(4_000_000_000, &XYZ, &[0.0; 9], true);
     c.file("ply_huge_count_binary", "hugebin.ply", &b, Ingest, ANY_LOC);
     let b = binary_ply(u64::MAX / 4, &XYZ, &[0.0; 9], true);
@@ -323,6 +330,11 @@ fn ply_cases(c: &mut Corpus) {
         Ingest,
         ELEMENT,
     );
+}
+
+/// Binary PLY records, odd headers and the other commands.
+fn ply_binary_cases(c: &mut Corpus) {
+    use Cmd::*;
     let b = binary_ply(
         3,
         &XYZ,
@@ -433,7 +445,11 @@ fn ply_cases(c: &mut Corpus) {
         Info,
         ELEMENT,
     );
-    // Normals: another change makes these ingest errors.
+}
+
+/// NaN, infinite and zero normals (another change makes these ingest errors).
+fn ply_normal_cases(c: &mut Corpus) {
+    use Cmd::*;
     for (name, n) in [
         ("ply_nan_normals", "nan 0 1"),
         ("ply_inf_normals", "0 inf 1"),
@@ -849,33 +865,41 @@ fn edit(f: impl Fn(&mut serde_json::Value)) -> impl Fn(&Path) -> PathBuf {
     }
 }
 
-fn store_cases(c: &mut Corpus) {
-    use Cmd::*;
-    let base = make_store(&c.dir("store_base"));
-    let store = |c: &mut Corpus,
-                 name: &str,
-                 cmd: Cmd,
-                 loc: &'static [&'static str],
-                 damage: &dyn Fn(&Path) -> PathBuf| {
-        let st = c.dir(name).join(format!("{name}.store"));
-        copy_dir(&base, &st);
+impl Corpus {
+    /// A case on a copy of the store `base`, damaged by `damage`, which returns the file the
+    /// message must name.
+    fn store(
+        &mut self,
+        base: &Path,
+        name: &str,
+        cmd: Cmd,
+        loc: &'static [&'static str],
+        damage: &dyn Fn(&Path) -> PathBuf,
+    ) {
+        let st = self.dir(name).join(format!("{name}.store"));
+        copy_dir(base, &st);
         let named = damage(&st);
-        c.add_named(name, cmd, &st, &named, loc, None);
-    };
+        self.add_named(name, cmd, &st, &named, loc, None);
+    }
+}
+
+/// Damaged manifests: refused when the store is opened.
+fn store_manifest_cases(c: &mut Corpus, base: &Path) {
+    use Cmd::*;
     let dup = |m: &mut serde_json::Value| {
         let c1 = m["cells"][1].clone();
         m["cells"].as_array_mut().unwrap().insert(2, c1);
     };
-    store(c, "store_duplicate_cell", Info, CELL, &edit(dup));
-    store(
-        c,
+    c.store(base, "store_duplicate_cell", Info, CELL, &edit(dup));
+    c.store(
+        base,
         "store_duplicate_cell_reconstruct",
         Reconstruct,
         CELL,
         &edit(dup),
     );
-    store(
-        c,
+    c.store(
+        base,
         "store_wrong_point_count",
         Info,
         NONE,
@@ -883,8 +907,8 @@ fn store_cases(c: &mut Corpus) {
             m["point_count"] = (m["point_count"].as_u64().unwrap() * 2).into();
         }),
     );
-    store(
-        c,
+    c.store(
+        base,
         "store_wrong_cell_count",
         Verify,
         NONE,
@@ -896,8 +920,8 @@ fn store_cases(c: &mut Corpus) {
             m["cells"][1]["count"] = (b - 1).into();
         }),
     );
-    store(
-        c,
+    c.store(
+        base,
         "store_escape_path",
         Info,
         CELL,
@@ -905,8 +929,8 @@ fn store_cases(c: &mut Corpus) {
             m["cells"][0]["file"] = "../../../../etc/passwd".into();
         }),
     );
-    store(
-        c,
+    c.store(
+        base,
         "store_escape_path_reconstruct",
         Reconstruct,
         CELL,
@@ -914,8 +938,8 @@ fn store_cases(c: &mut Corpus) {
             m["cells"][0]["file"] = "../../../../etc/passwd".into();
         }),
     );
-    store(
-        c,
+    c.store(
+        base,
         "store_absolute_path",
         Info,
         CELL,
@@ -923,15 +947,15 @@ fn store_cases(c: &mut Corpus) {
             m["cells"][3]["file"] = "/etc/passwd".into();
         }),
     );
-    store(
-        c,
+    c.store(
+        base,
         "store_bad_key",
         Info,
         CELL,
         &edit(|m| m["cells"][0]["key"] = 0.into()),
     );
-    store(
-        c,
+    c.store(
+        base,
         "store_zero_count_cell",
         Info,
         CELL,
@@ -942,8 +966,8 @@ fn store_cases(c: &mut Corpus) {
             m["cells"][1]["count"] = (a + b).into();
         }),
     );
-    store(
-        c,
+    c.store(
+        base,
         "store_huge_cell_count",
         Reconstruct,
         CELL,
@@ -957,15 +981,15 @@ fn store_cases(c: &mut Corpus) {
             m["inputs"][0]["points"] = (n + m["skipped_invalid"].as_u64().unwrap()).into();
         }),
     );
-    store(
-        c,
+    c.store(
+        base,
         "store_bad_compression",
         Info,
         NONE,
         &edit(|m| m["compression"] = "lz4".into()),
     );
-    store(
-        c,
+    c.store(
+        base,
         "store_bad_record_fields",
         Info,
         NONE,
@@ -973,8 +997,8 @@ fn store_cases(c: &mut Corpus) {
             m["record_fields"][0] = "x:f16".into();
         }),
     );
-    store(
-        c,
+    c.store(
+        base,
         "store_unsorted_cells",
         Info,
         CELL,
@@ -982,19 +1006,24 @@ fn store_cases(c: &mut Corpus) {
             m["cells"].as_array_mut().unwrap().swap(0, 1);
         }),
     );
+}
+
+/// Damaged cell files and store directories.
+fn store_file_cases(c: &mut Corpus, base: &Path) {
+    use Cmd::*;
     #[cfg(unix)]
-    store(c, "store_symlink_out", Info, CELL, &|st: &Path| {
+    c.store(base, "store_symlink_out", Info, CELL, &|st: &Path| {
         let cell = cell_file(st, 1);
         let outside = st.parent().unwrap().join("outside.zst");
         std::fs::rename(&cell, &outside).unwrap();
         std::os::unix::fs::symlink(&outside, &cell).unwrap();
         st.to_path_buf()
     });
-    store(c, "store_missing_cell", Info, CELL, &|st: &Path| {
+    c.store(base, "store_missing_cell", Info, CELL, &|st: &Path| {
         std::fs::remove_file(cell_file(st, 2)).unwrap();
         st.to_path_buf()
     });
-    store(c, "store_truncated_cell", Info, CELL, &|st: &Path| {
+    c.store(base, "store_truncated_cell", Info, CELL, &|st: &Path| {
         let cell = cell_file(st, 2);
         let b = std::fs::read(&cell).unwrap();
         std::fs::write(&cell, &b[..b.len() / 3]).unwrap();
@@ -1008,9 +1037,9 @@ fn store_cases(c: &mut Corpus) {
         std::fs::write(&cell, &b).unwrap();
         cell
     };
-    store(c, "store_corrupt_cell_verify", Verify, NONE, &corrupt);
-    store(
-        c,
+    c.store(base, "store_corrupt_cell_verify", Verify, NONE, &corrupt);
+    c.store(
+        base,
         "store_corrupt_cell_reconstruct",
         Reconstruct,
         NONE,
@@ -1022,22 +1051,22 @@ fn store_cases(c: &mut Corpus) {
         std::fs::write(&cell, junk(n, 3)).unwrap();
         cell
     };
-    store(c, "store_junk_cell_verify", Verify, NONE, &junk_cell);
+    c.store(base, "store_junk_cell_verify", Verify, NONE, &junk_cell);
     let manifest_bytes = |bytes: Vec<u8>| {
         move |st: &Path| {
             std::fs::write(st.join("manifest.json"), &bytes).unwrap();
             st.join("manifest.json")
         }
     };
-    store(
-        c,
+    c.store(
+        base,
         "store_garbage_manifest",
         Info,
         NONE,
         &manifest_bytes(junk(2000, 9)),
     );
-    store(
-        c,
+    c.store(
+        base,
         "store_empty_json_manifest",
         Info,
         NONE,
@@ -1045,33 +1074,33 @@ fn store_cases(c: &mut Corpus) {
     );
     let half = std::fs::read(base.join("manifest.json")).unwrap();
     let half = half[..half.len() / 2].to_vec();
-    store(
-        c,
+    c.store(
+        base,
         "store_truncated_manifest",
         Info,
         LINE,
         &manifest_bytes(half.clone()),
     );
-    store(
-        c,
+    c.store(
+        base,
         "store_truncated_manifest_reconstruct",
         Reconstruct,
         LINE,
         &manifest_bytes(half),
     );
-    store(
-        c,
+    c.store(
+        base,
         "store_wrong_version",
         Info,
         NONE,
         &edit(|m| m["version"] = 99.into()),
     );
-    store(c, "store_missing_manifest", Info, NONE, &|st: &Path| {
+    c.store(base, "store_missing_manifest", Info, NONE, &|st: &Path| {
         std::fs::remove_file(st.join("manifest.json")).unwrap();
         st.to_path_buf()
     });
     #[cfg(unix)]
-    store(c, "store_fifo_manifest", Info, NONE, &|st: &Path| {
+    c.store(base, "store_fifo_manifest", Info, NONE, &|st: &Path| {
         let m = st.join("manifest.json");
         std::fs::remove_file(&m).unwrap();
         // A FIFO (reading it would block), or a directory where mkfifo is missing.
@@ -1081,7 +1110,7 @@ fn store_cases(c: &mut Corpus) {
         }
         m
     });
-    store(c, "store_missing_cells_dir", Info, NONE, &|st: &Path| {
+    c.store(base, "store_missing_cells_dir", Info, NONE, &|st: &Path| {
         std::fs::remove_dir_all(st.join("cells")).unwrap();
         st.to_path_buf()
     });
@@ -1179,12 +1208,17 @@ fn malformed_inputs_fail_cleanly_naming_file_and_place() {
         root: d.path().to_path_buf(),
         cases: Vec::new(),
     };
-    ply_cases(&mut c);
+    ply_header_cases(&mut c);
+    ply_data_cases(&mut c);
+    ply_binary_cases(&mut c);
+    ply_normal_cases(&mut c);
     xyz_cases(&mut c);
     las_cases(&mut c);
     conf_cases(&mut c);
     special_cases(&mut c);
-    store_cases(&mut c);
+    let base = make_store(&c.dir("store_base"));
+    store_manifest_cases(&mut c, &base);
+    store_file_cases(&mut c, &base);
     let cases = c.cases;
     assert!(cases.len() >= 60, "only {} cases", cases.len());
     let next = AtomicUsize::new(0);
