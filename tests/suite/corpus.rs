@@ -1,6 +1,6 @@
-//! The malformed-input corpus (issue 13): about 90 broken PLY, XYZ, LAS/LAZ, `.conf` files,
+//! The malformed-input corpus (issue 13): over 120 broken PLY, XYZ, LAS/LAZ, `.conf` files,
 //! FIFOs and devices, and damaged stores, generated here in a temp dir, each run through
-//! `ingest`, `reconstruct`, `info` or `info --verify` under a time limit. Every run must exit
+//! `ingest`, `reconstruct`, `info`, `info --verify` or `check` under a time limit. Every run must exit
 //! non-zero without a panic, name the offending file and, where the defect has one, its
 //! location (line, element, byte or cell), and leave no output and no temporary file.
 //!
