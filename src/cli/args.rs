@@ -318,6 +318,10 @@ pub struct InfoArgs {
     /// Print JSON instead of text.
     #[arg(long)]
     pub json: bool,
+    /// Store: read every cell, checking its record count and CRC-32 (without it, only that
+    /// each cell file is there with its size). A point file is always read whole.
+    #[arg(long)]
+    pub verify: bool,
     /// Threads, memory, progress.
     #[command(flatten)]
     pub common: Common,

@@ -426,6 +426,8 @@ pub struct InfoConfig {
     pub path: PathBuf,
     /// Print JSON.
     pub json: bool,
+    /// Read and check every cell of a store.
+    pub verify: bool,
 }
 
 impl InfoConfig {
@@ -434,6 +436,7 @@ impl InfoConfig {
             run: RunConfig::new(&a.common)?,
             path: a.path,
             json: a.json,
+            verify: a.verify,
         })
     }
 }

@@ -1,11 +1,12 @@
-//! `scanflow info`: describe a store (from its manifest) or a point file (one scan of it).
+//! `scanflow info`: describe a store (from its manifest, its cell files checked for presence and
+//! size; with `--verify` every cell read and checked) or a point file (one scan of it).
 
 use std::collections::BTreeMap;
 
 use anyhow::Result;
 
 use scanflow::exec::Ctx;
-use scanflow::store::Store;
+use scanflow::store::{Store, verify};
 
 use super::config::InfoConfig;
 use super::report;
@@ -14,8 +15,13 @@ use super::report;
 pub fn run(c: &InfoConfig, ctx: &Ctx) -> Result<()> {
     if c.path.is_dir() {
         let store = Store::open(&c.path)?;
+        let verified = if c.verify {
+            Some(verify::verify_cells(&store, ctx)?)
+        } else {
+            None
+        };
         let summary = StoreSummary::new(&store);
-        report::store(&c.path, &store, &summary, c.json)
+        report::store(&c.path, &store, &summary, verified.as_ref(), c.json)
     } else {
         let fi = scanflow::store::file_info(&c.path, ctx)?;
         report::file(&fi, c.json)

@@ -8,6 +8,7 @@ use anyhow::Result;
 use scanflow::exec::{human_bytes, peak_rss_bytes};
 use scanflow::metrics::CheckReport;
 use scanflow::pipeline::ReconStats;
+use scanflow::store::verify::VerifyReport;
 use scanflow::store::{FileInfo, IngestStats, Store};
 use scanflow::synth::{Shape, SynthReport};
 use scanflow::types::Aabb;
@@ -109,7 +110,13 @@ pub fn demo_done(mesh: &Path, depth: u32, st: &ReconStats, check: &CheckReport, 
 }
 
 /// `info` on a store: its manifest and the cells' levels and sizes.
-pub fn store(path: &Path, store: &Store, s: &StoreSummary, json: bool) -> Result<()> {
+pub fn store(
+    path: &Path,
+    store: &Store,
+    s: &StoreSummary,
+    verified: Option<&VerifyReport>,
+    json: bool,
+) -> Result<()> {
     let m = &store.manifest;
     if json {
         let v = serde_json::json!({
@@ -127,6 +134,7 @@ pub fn store(path: &Path, store: &Store, s: &StoreSummary, json: bool) -> Result
                 serde_json::json!({"min_points": lo, "max_points": hi, "cells": n})
             }).collect::<Vec<_>>(),
             "inputs": m.inputs,
+            "verified": verified,
         });
         outln!("{v}");
         return Ok(());
@@ -153,6 +161,14 @@ pub fn store(path: &Path, store: &Store, s: &StoreSummary, json: bool) -> Result
         let (lo, hi) = StoreSummary::bin_range(*b);
         let bar = "#".repeat((n * HISTOGRAM_WIDTH).div_ceil(most));
         outln!("  {:>10} .. {:<10} {:>6} {}", lo, hi, n, bar);
+    }
+    if let Some(v) = verified {
+        outln!(
+            "verified    {} cells read, {} points, {}: record counts and CRC-32s match",
+            v.cells,
+            v.points,
+            human_bytes(v.bytes)
+        );
     }
     Ok(())
 }

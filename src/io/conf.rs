@@ -23,6 +23,7 @@ use crate::types::{Rigid, Viewpoint};
 
 /// Read a `.conf` file into inputs with their transforms.
 pub fn read_conf(path: &Path) -> Result<Vec<InputSpec>> {
+    crate::io::regular_file(path, "a .conf scan list")?;
     let text = std::fs::read_to_string(path).with_path(path)?;
     let dir = path.parent().unwrap_or(Path::new("."));
     let mut out = Vec::new();
@@ -66,11 +67,11 @@ pub fn read_conf(path: &Path) -> Result<Vec<InputSpec>> {
                     ));
                 }
                 let file = dir.join(toks[1]);
-                if !file.is_file() {
+                if let Some(what) = not_a_scan_file(&file) {
                     return Err(Error::format(
                         path,
                         Location::Line(line_no),
-                        format!("scan file {} does not exist", file.display()),
+                        format!("scan file {} {what}", file.display()),
                     ));
                 }
                 // Conjugate: (x, y, z, -w) is the same rotation as (-x, -y, -z, w).
@@ -100,6 +101,21 @@ pub fn read_conf(path: &Path) -> Result<Vec<InputSpec>> {
     Ok(out)
 }
 
+/// Why `file` cannot be read as a scan, if it cannot: "does not exist", "is a directory",
+/// "is not a regular file (a FIFO)". Looks at the file's type only, so a FIFO does not block.
+fn not_a_scan_file(file: &Path) -> Option<String> {
+    match std::fs::metadata(file) {
+        Ok(m) if m.is_file() => None,
+        Ok(m) if m.is_dir() => Some("is a directory, expected a point file".into()),
+        Ok(m) => Some(format!(
+            "is not a regular file ({})",
+            crate::io::file_kind(m.file_type())
+        )),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Some("does not exist".into()),
+        Err(e) => Some(format!("cannot be read ({e})")),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -118,6 +134,23 @@ mod tests {
             e.contains("a.conf: line 2") && e.contains("does not exist"),
             "{e}"
         );
+    }
+
+    #[test]
+    fn conf_naming_a_directory_says_it_is_a_directory() {
+        let d = tempfile::tempdir().unwrap();
+        std::fs::create_dir(d.path().join("scans")).unwrap();
+        let p = d.path().join("a.conf");
+        std::fs::write(&p, "bmesh scans 0 0 0 0 0 0 1\n").unwrap();
+        let e = read_conf(&p).unwrap_err().to_string();
+        assert!(
+            e.contains("a.conf: line 1") && e.contains("is a directory"),
+            "{e}"
+        );
+        assert!(!e.contains("does not exist"), "{e}");
+        // The .conf itself a directory.
+        let e = read_conf(d.path()).unwrap_err().to_string();
+        assert!(e.contains("is a directory"), "{e}");
     }
 
     #[test]

@@ -28,6 +28,10 @@ const SCALE_AT: [u64; 3] = [131, 139, 147];
 const VERSION_AT: u64 = 24;
 /// Byte offset of the offset to point data in the LAS header.
 const DATA_OFFSET_AT: u64 = 96;
+/// Byte of the header size field.
+const HEADER_SIZE_AT: u64 = 94;
+/// Byte of the point data format field (the record length follows it).
+const POINT_FORMAT_AT: u64 = 104;
 
 /// Run `f`, turning a panic inside the `las`/`laz` crates (on corrupt data) into an error.
 fn guard<T>(f: impl FnOnce() -> T) -> std::result::Result<T, String> {
@@ -92,6 +96,7 @@ fn read_raw_header(path: &Path, file_len: u64) -> Result<las::raw::Header> {
             format!("unsupported LAS version {major}.{minor}, expected 1.0 to 1.4"),
         ));
     }
+    check_header_fields(path, &raw)?;
     let data_start = u64::from(raw.offset_to_point_data);
     if data_start > file_len {
         return Err(Error::format(
@@ -113,6 +118,57 @@ fn read_raw_header(path: &Path, file_len: u64) -> Result<las::raw::Header> {
         }
     }
     Ok(raw)
+}
+
+/// Check the header size, point format and record length of a raw header against its
+/// version, naming the field's byte.
+fn check_header_fields(path: &Path, raw: &las::raw::Header) -> Result<()> {
+    let min_header = match raw.version.minor {
+        0..=2 => 227,
+        3 => 235,
+        _ => 375,
+    };
+    if raw.header_size < min_header {
+        return Err(Error::format(
+            path,
+            Location::Byte(HEADER_SIZE_AT),
+            format!(
+                "header size {} is smaller than the {min_header} bytes of a LAS {}.{} header",
+                raw.header_size, raw.version.major, raw.version.minor
+            ),
+        ));
+    }
+    if raw.offset_to_point_data < u32::from(raw.header_size) {
+        return Err(Error::format(
+            path,
+            Location::Byte(DATA_OFFSET_AT),
+            format!(
+                "the point data starts at byte {}, inside the {}-byte header",
+                raw.offset_to_point_data, raw.header_size
+            ),
+        ));
+    }
+    // Bits 6 and 7 flag LASzip compression.
+    let number = raw.point_data_record_format & 0x3f;
+    let Ok(fmt) = las::point::Format::new(number) else {
+        return Err(Error::format(
+            path,
+            Location::Byte(POINT_FORMAT_AT),
+            format!("point data format {number}, expected 0 to 10"),
+        ));
+    };
+    if raw.point_data_record_length < fmt.len() {
+        return Err(Error::format(
+            path,
+            Location::Byte(POINT_FORMAT_AT + 1),
+            format!(
+                "point records of {} bytes, but point format {number} needs at least {}",
+                raw.point_data_record_length,
+                fmt.len()
+            ),
+        ));
+    }
+    Ok(())
 }
 
 /// Open the `las` decoder on `path` (its header, variable-length records and, for LAZ, the
@@ -201,6 +257,7 @@ impl LasReader {
     /// Open a LAS or LAZ file: read and check its header and, for uncompressed files, that
     /// the file is long enough for every point record the header declares.
     pub fn open(path: &Path) -> Result<LasReader> {
+        crate::io::regular_file(path, "a LAS or LAZ file")?;
         let mut file = File::open(path).with_path(path)?;
         let file_len = file.metadata().with_path(path)?.len();
         check_signature(&mut file, path)?;
@@ -626,7 +683,7 @@ mod tests {
         std::fs::write(&p, &bad).unwrap();
         let e = LasReader::open(&p).err().unwrap().to_string();
         assert!(
-            e.contains("fake.las") && e.contains("invalid LAS header"),
+            e.contains("fake.las") && e.contains("byte 104: point data format 42"),
             "{e}"
         );
     }

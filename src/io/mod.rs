@@ -8,7 +8,9 @@
 //!
 //! # Module map
 //!
-//! Readers ([`open`] picks one by content and extension):
+//! Readers ([`open`] picks one by content and extension; each first checks, from the file's
+//! type alone, that its path is a regular file ([`regular_file`]), so a directory, FIFO or
+//! device is named as such and a FIFO is never opened, which would block):
 //!
 //! * [`ply`]: PLY points, ascii and binary (`header.rs` the header, `decode.rs` the records);
 //! * [`las`]: LAS and LAZ;
@@ -75,6 +77,12 @@ impl Format {
             Format::Laz => "LAZ",
             Format::Xyz => "XYZ text",
         }
+    }
+
+    /// LAS or LAZ: the same point records, uncompressed or LASzip-compressed. Every rule keyed
+    /// on LAS (normals face up without a viewpoint, 8-bit colour scaling) covers both.
+    pub fn is_las(self) -> bool {
+        matches!(self, Format::Las | Format::Laz)
     }
 }
 
@@ -162,10 +170,7 @@ impl InputSpec {
 /// Open a point file, choosing the reader by content (PLY magic, LAS signature) and, for text,
 /// by extension (`.xyz`, `.pts`, `.txt`, `.csv` is not supported).
 pub fn open(path: &Path) -> Result<Box<dyn PointReader>> {
-    let meta = std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
-    if meta.is_dir() {
-        return Err(Error::input(path, "is a directory, expected a point file"));
-    }
+    let meta = regular_file(path, "a point file")?;
     if meta.len() == 0 {
         return Err(Error::input(path, "empty file (0 bytes)"));
     }
@@ -208,6 +213,53 @@ pub fn open(path: &Path) -> Result<Box<dyn PointReader>> {
     }
 }
 
+/// The kind of a file that is not a regular file, in words ("a directory", "a FIFO", ...).
+pub fn file_kind(t: std::fs::FileType) -> &'static str {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        if t.is_fifo() {
+            return "a FIFO";
+        }
+        if t.is_char_device() {
+            return "a character device";
+        }
+        if t.is_block_device() {
+            return "a block device";
+        }
+        if t.is_socket() {
+            return "a socket";
+        }
+    }
+    if t.is_dir() {
+        "a directory"
+    } else if t.is_file() {
+        "a regular file"
+    } else {
+        "not a regular file"
+    }
+}
+
+/// The metadata of `path` (symbolic links followed), which must be a regular file: a
+/// directory, FIFO, device or socket is an error saying which, with `expected` in the
+/// message ("a point file"). Reads no byte of the file and does not open it, so a FIFO cannot
+/// block; every reader calls it before opening its file.
+pub fn regular_file(path: &Path, expected: &str) -> Result<std::fs::Metadata> {
+    let meta = std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
+    if meta.is_file() {
+        return Ok(meta);
+    }
+    let kind = file_kind(meta.file_type());
+    Err(Error::input(
+        path,
+        if meta.is_dir() {
+            format!("is a directory, expected {expected}")
+        } else {
+            format!("not a regular file ({kind}), expected {expected}")
+        },
+    ))
+}
+
 /// Chunks of at most `target` records out of `total` fixed-size records, record `i` starting
 /// at byte `byte_of(i)` (binary formats).
 pub fn record_chunks(total: u64, target: u64, byte_of: impl Fn(u64) -> u64) -> Vec<ChunkSpec> {
@@ -245,4 +297,50 @@ pub fn non_finite_axis(p: [f64; 3]) -> Option<&'static str> {
 /// Message for a non-finite coordinate.
 pub fn non_finite_msg(axis: &str, v: f64) -> String {
     format!("{axis} is {v}, expected a finite coordinate (use --skip-invalid to drop such points)")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn open_err(p: &Path) -> String {
+        match open(p) {
+            Ok(_) => panic!("{} opened", p.display()),
+            Err(e) => e.to_string(),
+        }
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn fifo_and_char_device_are_not_regular_files() {
+        let d = tempfile::tempdir().unwrap();
+        let fifo = d.path().join("pipe.ply");
+        let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+        if matches!(made, Ok(s) if s.success()) {
+            // Would block forever if the FIFO were opened for reading.
+            let e = open_err(&fifo);
+            assert!(e.contains("pipe.ply") && e.contains("(a FIFO)"), "{e}");
+            assert!(!e.contains("empty"), "{e}");
+            for e in [
+                ply::PlyReader::open(&fifo).err(),
+                las::LasReader::open(&fifo).err(),
+                xyz::XyzReader::open(&fifo).err(),
+            ] {
+                let e = e.expect("a FIFO is refused").to_string();
+                assert!(e.contains("(a FIFO)"), "{e}");
+            }
+        } else {
+            eprintln!("skipped the FIFO: mkfifo is not available");
+        }
+        let zero = Path::new("/dev/zero");
+        if zero.exists() {
+            let e = open_err(zero);
+            assert!(
+                e.contains("/dev/zero") && e.contains("(a character device)"),
+                "{e}"
+            );
+        }
+        let e = open_err(d.path());
+        assert!(e.contains("is a directory"), "{e}");
+    }
 }

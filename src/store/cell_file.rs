@@ -18,7 +18,7 @@
 use std::io::Read;
 use std::path::Path;
 
-use crate::error::{Error, IoContext, Location, Result};
+use crate::error::{Error, IoContext, Result};
 use crate::io::atomic::{self, Durability};
 use crate::types::{Aabb, Attributes, PointBatch};
 
@@ -286,13 +286,12 @@ impl<'a> CellReader<'a> {
         let mut filled = 0;
         while filled < buf.len() {
             let n = self.dec.read(&mut buf[filled..]).map_err(|e| {
-                Error::format(
+                Error::input(
                     self.path,
-                    Location::Element {
-                        index: self.records_read + (filled / stride) as u64,
-                        byte: 0,
-                    },
-                    format!("corrupt cell file: {e}"),
+                    format!(
+                        "corrupt cell file: decompression failed at record {} ({e})",
+                        self.records_read + (filled / stride) as u64
+                    ),
                 )
             })?;
             if n == 0 {
@@ -301,14 +300,11 @@ impl<'a> CellReader<'a> {
             filled += n;
         }
         if filled % stride != 0 {
-            return Err(Error::format(
+            return Err(Error::input(
                 self.path,
-                Location::Element {
-                    index: self.records_read + (filled / stride) as u64,
-                    byte: 0,
-                },
                 format!(
-                    "corrupt cell file: it ends inside a record ({} bytes past the last whole record of {} bytes)",
+                    "corrupt cell file: it ends inside record {} ({} bytes past the last whole record of {} bytes)",
+                    self.records_read + (filled / stride) as u64,
                     filled % stride,
                     stride
                 ),

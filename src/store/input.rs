@@ -5,7 +5,7 @@
 use std::sync::atomic::{AtomicBool, AtomicU16, Ordering};
 
 use crate::error::{Error, Result};
-use crate::io::{ChunkSpec, Format, InputSpec, PointReader};
+use crate::io::{ChunkSpec, InputSpec, PointReader};
 use crate::store::cell_file::RecordLayout;
 use crate::store::manifest::InputEntry;
 use crate::store::{NormalsMode, StoreParams};
@@ -136,7 +136,7 @@ impl Inputs {
         let st = self.readers[ri].read_chunk(spec, self.skip_invalid, batch)?;
         // LAS files often hold 8-bit colour in their 16-bit fields: the count pass records
         // each input's largest channel ([`Inputs::settle_colour_scale`] then decides).
-        if self.layout.attrs.color && self.readers[ri].format() == Format::Las {
+        if self.layout.attrs.color && self.readers[ri].format().is_las() {
             let m = batch
                 .color
                 .iter()
@@ -168,7 +168,7 @@ impl Inputs {
     pub fn settle_colour_scale(&self) {
         for (ri, r) in self.readers.iter().enumerate() {
             let m = self.max_color[ri].load(Ordering::Relaxed);
-            if self.layout.attrs.color && r.format() == Format::Las && m <= 255 {
+            if self.layout.attrs.color && r.format().is_las() && m <= 255 {
                 log::info!(
                     "{}: colours are 8-bit (at most {m}) in 16-bit fields; scaled by 257",
                     r.path().display()
@@ -220,13 +220,14 @@ fn common_attributes(readers: &[Box<dyn PointReader>]) -> Attributes {
     attrs
 }
 
-/// Airborne LiDAR is seen from above: LAS inputs without a viewpoint face up.
+/// Airborne LiDAR is seen from above: LAS and LAZ inputs without a viewpoint face up.
 fn default_viewpoints(specs: &mut [InputSpec], readers: &[Box<dyn PointReader>]) {
     for (i, r) in specs.iter_mut().zip(readers) {
-        if i.viewpoint.is_none() && r.format() == Format::Las {
+        if i.viewpoint.is_none() && r.format().is_las() {
             log::info!(
-                "{}: LAS without --viewpoint: normals face up (+z), as seen from the air",
-                i.path.display()
+                "{}: {} without --viewpoint: normals face up (+z), as seen from the air",
+                i.path.display(),
+                r.format().name()
             );
             i.viewpoint = Some(Viewpoint::Direction([0.0, 0.0, 1.0]));
         }
@@ -245,4 +246,50 @@ fn transform_box(b: &Aabb, i: &InputSpec) -> Aabb {
         out.add(i.transform.apply(c));
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::path::Path;
+
+    /// A small terrain of `n * n` points (point format 0, no normals) as LAS or LAZ, by
+    /// extension.
+    fn write_terrain(path: &Path, n: usize) {
+        let mut builder = las::Builder::default();
+        builder.point_format = las::point::Format::new(0).unwrap();
+        let header = builder.into_header().unwrap();
+        let mut w = las::Writer::from_path(path, header).unwrap();
+        for i in 0..n {
+            for j in 0..n {
+                let (x, y) = (i as f64, j as f64);
+                let p = las::Point {
+                    x,
+                    y,
+                    z: 0.1 * (x * 0.3).sin() * (y * 0.2).cos(),
+                    ..Default::default()
+                };
+                w.write_point(p).unwrap();
+            }
+        }
+        w.close().unwrap();
+    }
+
+    #[test]
+    fn laz_without_viewpoint_faces_up_like_las() {
+        let d = tempfile::tempdir().unwrap();
+        for name in ["t.las", "t.laz", "t.LAZ"] {
+            let p = d.path().join(name);
+            write_terrain(&p, 8);
+            let inputs = Inputs::open(&[InputSpec::plain(&p)], &StoreParams::default()).unwrap();
+            assert!(inputs.readers[0].format().is_las(), "{name}");
+            assert!(inputs.estimate_normals, "{name}");
+            assert_eq!(
+                inputs.specs[0].viewpoint,
+                Some(Viewpoint::Direction([0.0, 0.0, 1.0])),
+                "{name}"
+            );
+            assert!(inputs.layout.attrs.source, "{name}");
+        }
+    }
 }

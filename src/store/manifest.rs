@@ -128,6 +128,10 @@ impl Manifest {
                 "not a scanflow store (not a directory)",
             ));
         }
+        if path.exists() {
+            // A FIFO would block the read.
+            crate::io::regular_file(&path, "a store manifest")?;
+        }
         let text = std::fs::read_to_string(&path).map_err(|e| {
             if e.kind() == std::io::ErrorKind::NotFound {
                 Error::input(

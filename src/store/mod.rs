@@ -30,6 +30,10 @@
 //! the directory, so a store is either complete or absent. Between the two, the cells of a
 //! staged store may be rewritten (with estimated normals, by the pipeline).
 //!
+//! **Checks.** [`Store::open`] trusts no manifest: it refuses one that lists a cell twice,
+//! names a file outside `cells/` or miscounts, and cell files that are missing, linked or
+//! resized ([`verify`]); reading a cell checks its record count and CRC-32.
+//!
 //! **Memory.** The counting grid ([`Share::CountingGrid`]), the chunks in flight
 //! ([`Share::IngestChunks`], [`CHUNK_BYTES_PER_POINT`] a point) and the cell buffers
 //! ([`Share::ScatterBuffers`]) are each admitted by the budget before they are allocated;
@@ -44,6 +48,7 @@ pub mod manifest;
 pub mod octree;
 pub mod scatter;
 pub mod split;
+pub mod verify;
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -491,7 +496,8 @@ pub struct Store {
 }
 
 impl Store {
-    /// Open a store and check its manifest.
+    /// Open a store and check its manifest and that its cell files are there, each a regular
+    /// file of the listed size ([`verify`]); reads no cell.
     pub fn open(dir: &Path) -> Result<Store> {
         let manifest = Manifest::load(dir)?;
         let layout = RecordLayout::new(manifest.attributes, manifest.position_f32);
@@ -504,11 +510,14 @@ impl Store {
                 ),
             ));
         }
-        Ok(Store {
+        verify::check_manifest(dir, &manifest)?;
+        let store = Store {
             dir: dir.to_path_buf(),
             manifest,
             layout,
-        })
+        };
+        verify::check_cell_files(&store)?;
+        Ok(store)
     }
 
     /// The file of cell `i`.

@@ -62,6 +62,7 @@ const BUF_BYTES: usize = 1 << 20;
 /// Number of records of the `face` element of a PLY file: `None` when the file is not a PLY
 /// (does not start with `ply`) or declares no `face` element.
 pub fn ply_face_count(path: &Path) -> Result<Option<u64>> {
+    crate::io::regular_file(path, "a PLY file")?;
     let mut f = File::open(path).with_path(path)?;
     let mut head = Vec::new();
     (&mut f)

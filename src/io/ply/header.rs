@@ -233,7 +233,15 @@ pub fn parse_header(path: &Path, bytes: &[u8]) -> Result<PlyHeader> {
                 let Some(el) = elements.last_mut() else {
                     return Err(bad("property before any element".into()));
                 };
-                el.props.push(parse_property(&toks, line, &bad)?);
+                let prop = parse_property(&toks, line, &bad)?;
+                if el.props.iter().any(|q| q.name() == prop.name()) {
+                    return Err(bad(format!(
+                        "property \"{}\" declared twice in element \"{}\"",
+                        prop.name(),
+                        el.name
+                    )));
+                }
+                el.props.push(prop);
             }
             Some("end_header") => break,
             Some(other) => {

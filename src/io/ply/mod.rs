@@ -72,6 +72,7 @@ impl PlyReader {
     /// Open and validate a PLY file: header, vertex properties, and (binary) that the file
     /// holds every element the header declares.
     pub fn open(path: &Path) -> Result<PlyReader> {
+        crate::io::regular_file(path, "a PLY file")?;
         let file = File::open(path).with_path(path)?;
         let file_len = file.metadata().with_path(path)?.len();
         if file_len == 0 {

@@ -61,11 +61,9 @@ impl XyzReader {
     }
 
     fn open_with_window(path: &Path, window: u64) -> Result<XyzReader> {
+        crate::io::regular_file(path, "a point file")?;
         let file = File::open(path).with_path(path)?;
         let meta = file.metadata().with_path(path)?;
-        if meta.is_dir() {
-            return Err(Error::input(path, "is a directory, expected a point file"));
-        }
         let file_len = meta.len();
         if file_len == 0 {
             return Err(Error::input(path, "no points: the file is empty (0 bytes)"));
