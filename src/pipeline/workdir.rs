@@ -116,7 +116,10 @@ impl RunIdentity {
             StoreSource::Store(dir) => {
                 let manifest = dir.join(MANIFEST);
                 put("store", canonical(dir)?);
-                put("store manifest", file_identity(&manifest)?);
+                put(
+                    "store manifest",
+                    file_identity(&manifest, "a store manifest")?,
+                );
             }
             StoreSource::Points(specs) => {
                 put("--normals", format!("{normals:?}"));
@@ -126,7 +129,10 @@ impl RunIdentity {
                 for (i, s) in specs.iter().enumerate() {
                     let n = i + 1;
                     put(&format!("input {n}"), canonical(&s.path)?);
-                    put(&format!("input {n} content"), file_identity(&s.path)?);
+                    put(
+                        &format!("input {n} content"),
+                        file_identity(&s.path, "a point file")?,
+                    );
                     put(&format!("input {n} pose"), format!("{:?}", s.transform));
                     put(
                         &format!("input {n} viewpoint"),
@@ -164,9 +170,10 @@ fn canonical(path: &Path) -> Result<String> {
         .into_owned())
 }
 
-/// Size, modification time and fingerprint of the file `path`, as text.
-fn file_identity(path: &Path) -> Result<String> {
-    let meta = std::fs::metadata(path).with_path(path)?;
+/// Size, modification time and fingerprint of the file `path` (`what` it should be), as text.
+fn file_identity(path: &Path, what: &str) -> Result<String> {
+    // Never opens a FIFO or a device (opening a FIFO blocks).
+    let meta = crate::io::regular_file(path, what)?;
     let modified = meta
         .modified()
         .ok()

@@ -43,6 +43,8 @@ struct Case {
     pending: Option<&'static str>,
     /// The case's own directory, where no temporary file may be left.
     dir: PathBuf,
+    /// The exit status: 1 for a bad input, 2 for a bad command line.
+    code: i32,
 }
 
 /// Builds the cases, each in its own directory under `root`.
@@ -126,6 +128,28 @@ impl Corpus {
             out,
             pending,
             dir,
+            code: 1,
+        });
+    }
+
+    /// A usage case: `reconstruct` of a good input with the options `extra`, which must exit
+    /// 2 naming `named` (an option or a path) before any work.
+    fn usage(&mut self, name: &str, input: &Path, out: &str, extra: &[&str], named: &str) {
+        let dir = self.dir(name);
+        let o = dir.join(out);
+        let mut args: Vec<String> = vec!["reconstruct".into(), s(input).into(), "-o".into()];
+        args.push(s(&o).into());
+        args.extend(extra.iter().map(|a| a.to_string()));
+        args.extend(["--progress".into(), "none".into()]);
+        self.cases.push(Case {
+            name: name.into(),
+            args,
+            file: named.into(),
+            loc: NONE,
+            out: Some(o),
+            pending: None,
+            dir,
+            code: 2,
         });
     }
 
@@ -717,6 +741,7 @@ fn conf_cases(c: &mut Corpus) {
             out: Some(out),
             pending: None,
             dir: d.clone(),
+            code: 1,
         });
     };
     conf(
@@ -772,6 +797,7 @@ fn conf_cases(c: &mut Corpus) {
         out: Some(out),
         pending: None,
         dir: d.clone(),
+        code: 1,
     });
     let d = c.dir("conf_is_directory");
     let dir = d.join("dir.conf");
@@ -795,6 +821,7 @@ fn conf_cases(c: &mut Corpus) {
         out: Some(out),
         pending: None,
         dir: d.clone(),
+        code: 1,
     });
 }
 
@@ -820,6 +847,7 @@ fn special_cases(c: &mut Corpus) {
             out: None,
             pending: None,
             dir: d2,
+            code: 1,
         });
         let fifo_xyz = d.join("pipe.xyz");
         if matches!(Command::new("mkfifo").arg(&fifo_xyz).status(), Ok(s) if s.success()) {
@@ -1146,10 +1174,8 @@ fn run_case(c: &Case) -> Result<String, String> {
     };
     let err = reader.join().unwrap_or_default();
     let mut wrong = Vec::new();
-    if status.success() || status.code().is_none() {
-        wrong.push(format!(
-            "exit status {status}, expected a non-zero exit code"
-        ));
+    if status.code() != Some(c.code) {
+        wrong.push(format!("exit status {status}, expected {}", c.code));
     }
     if err.contains("panicked") {
         wrong.push("panicked".into());
@@ -1168,6 +1194,13 @@ fn run_case(c: &Case) -> Result<String, String> {
     {
         wrong.push(format!("output {} exists", o.display()));
     }
+    if let Some(o) = &c.out {
+        let mut w = o.as_os_str().to_owned();
+        w.push(".work");
+        if Path::new(&w).exists() {
+            wrong.push(format!("work directory {} left", Path::new(&w).display()));
+        }
+    }
     let tmp = temp_files(&c.dir);
     if !tmp.is_empty() {
         wrong.push(format!("temporary files left: {tmp:?}"));
@@ -1177,6 +1210,70 @@ fn run_case(c: &Case) -> Result<String, String> {
     } else {
         Err(format!("{}\n    stderr: {}", wrong.join("; "), err.trim()))
     }
+}
+
+/// Bad options and output paths, on a good input: usage errors, found before any work.
+fn option_cases(c: &mut Corpus) {
+    let good = c.write(
+        "opt_input",
+        "good.xyz",
+        "0 0 0\n1 0 0\n0 1 0\n0 0 1\n".as_bytes(),
+    );
+    let cases: [(&str, &str, &[&str], &str); 14] = [
+        ("opt_depth_low", "o.ply", &["--depth", "2"], "--depth 2"),
+        ("opt_depth_high", "o.ply", &["--depth", "14"], "--depth 14"),
+        (
+            "opt_tile_not_pow2",
+            "o.ply",
+            &["--tile", "100"],
+            "--tile 100",
+        ),
+        ("opt_tile_zero", "o.ply", &["--tile", "0"], "--tile 0"),
+        (
+            "opt_threads_huge",
+            "o.ply",
+            &["--threads", "100000"],
+            "--threads",
+        ),
+        ("opt_mem_word", "o.ply", &["--mem", "lots"], "--mem"),
+        ("opt_mem_zero", "o.ply", &["--mem", "0"], "--mem"),
+        ("opt_smooth_neg", "o.ply", &["--smooth=-1"], "--smooth"),
+        ("opt_error_nan", "o.ply", &["--error", "NaN"], "--error"),
+        (
+            "opt_viewpoint_two",
+            "o.ply",
+            &["--viewpoint", "1,2"],
+            "--viewpoint",
+        ),
+        (
+            "opt_neighbours_two",
+            "o.ply",
+            &["--neighbours", "2"],
+            "--neighbours",
+        ),
+        ("opt_gpu_word", "o.ply", &["--gpu", "maybe"], "--gpu"),
+        ("opt_out_obj", "o.obj", &[], "o.obj"),
+        ("opt_out_no_dir", "missing/o.ply", &[], "missing"),
+    ];
+    for (name, out, extra, named) in cases {
+        c.usage(name, &good, out, extra, named);
+    }
+    let input_out = c.dir("opt_out_is_input").join("in.ply");
+    std::fs::copy(&good, &input_out).unwrap();
+    let args: Vec<String> = ["reconstruct", s(&input_out), "-o", s(&input_out)]
+        .iter()
+        .map(|a| a.to_string())
+        .collect();
+    c.cases.push(Case {
+        name: "opt_out_is_input".into(),
+        args,
+        file: "in.ply".into(),
+        loc: NONE,
+        out: None,
+        pending: None,
+        dir: c.dir("opt_out_is_input"),
+        code: 2,
+    });
 }
 
 /// Files and directories under `dir` whose names hold `.tmp-`.
@@ -1219,6 +1316,7 @@ fn malformed_inputs_fail_cleanly_naming_file_and_place() {
     let base = make_store(&c.dir("store_base"));
     store_manifest_cases(&mut c, &base);
     store_file_cases(&mut c, &base);
+    option_cases(&mut c);
     let cases = c.cases;
     assert!(cases.len() >= 60, "only {} cases", cases.len());
     let next = AtomicUsize::new(0);
