@@ -81,6 +81,16 @@ impl Aabb {
 }
 
 /// A cube: the root of the octree.
+///
+/// **Translation invariance.** [`Cube::around`] puts the cube on a lattice tied to its size,
+/// so that the same points translated by a vector `t` of lattice steps get the cube translated
+/// by exactly `t`: the edge is rounded up to 8 significant bits, `m·q` with `q` a power of
+/// two and `128 ≤ m ≤ 256`, and the lower corner down to a multiple of `q/16`. Every grid
+/// node and cell corner `origin + k·size/2^d` (up to depth `d` = 20) is then exact in `f64`
+/// wherever `|origin| / size < 2^24`, so a point's offset from any of them is exact too, and
+/// everything downstream of the cube (plan, leaf grids, splats, tile fields, the iso-value)
+/// sees the same numbers for `P` and `P + t`. The corner moves by less than `size/2048`,
+/// well inside the margin.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Cube {
     /// Lower corner.
@@ -90,17 +100,25 @@ pub struct Cube {
 }
 
 impl Cube {
-    /// The cube centred on `b`, with edge the largest extent of `b` enlarged by `1 + margin`.
-    /// A box of zero extent gets edge 1 so that cells have a size.
+    /// The cube around `b`, with edge the largest extent of `b` enlarged by `1 + margin`,
+    /// rounded up and placed on its lattice (see [`Cube`]); centred on `b` to within
+    /// `size/2048`. A box of zero extent gets edge 1 so that cells have a size.
     pub fn around(b: &Aabb, margin: f64) -> Cube {
         let e = b.extent();
         let mut size = e[0].max(e[1]).max(e[2]) * (1.0 + margin);
         if size.is_nan() || size <= 0.0 || !size.is_finite() {
             size = 1.0;
         }
+        let q = lattice_quantum(size);
+        if q > 0.0 && (size / q).is_finite() {
+            size = (size / q).ceil() * q;
+        }
+        let step = q / 16.0;
         let mut origin = [0.0; 3];
         for i in 0..3 {
-            origin[i] = 0.5 * (b.min[i] + b.max[i]) - 0.5 * size;
+            let o = 0.5 * (b.min[i] + b.max[i]) - 0.5 * size;
+            let snapped = (o / step).floor() * step;
+            origin[i] = if snapped.is_finite() { snapped } else { o };
         }
         Cube { origin, size }
     }
@@ -136,6 +154,20 @@ impl Cube {
             };
         }
         c
+    }
+}
+
+/// The power of two `q` with `128·q ≤ size < 256·q` (0 where `size` is too small for one).
+fn lattice_quantum(size: f64) -> f64 {
+    let e = size.log2().floor() as i32 - 7;
+    let q = 2f64.powi(e);
+    // log2 may round across a power of two; correct by one step either way.
+    if 128.0 * q > size {
+        q / 2.0
+    } else if 256.0 * q <= size {
+        q * 2.0
+    } else {
+        q
     }
 }
 
@@ -217,6 +249,34 @@ mod tests {
         assert_eq!(c.cell_coords([2.0, 1.5, -0.5], 1), [1, 1, 0]);
         let bx = c.cell_box(CellKey::new(1, [1, 0, 0]));
         assert_eq!(bx.min, [1.0, -0.5, -0.5]);
+    }
+
+    #[test]
+    fn cube_is_on_its_lattice_and_translates_exactly() {
+        let b = Aabb {
+            min: [0.123456789, -3.75, 2.0],
+            max: [40.9876543, 11.5, 9.25],
+        };
+        let c = Cube::around(&b, 0.1);
+        let q = lattice_quantum(c.size);
+        assert!(c.size >= 1.1 * 40.864197511 && c.size <= 1.1 * 40.864197511 * (1.0 + 1.0 / 128.0));
+        assert_eq!((c.size / q).fract(), 0.0);
+        for i in 0..3 {
+            assert!(c.origin[i] <= b.min[i] && c.origin[i] + c.size >= b.max[i]);
+            assert_eq!((c.origin[i] / (q / 16.0)).fract(), 0.0);
+        }
+        let t = [5.0e6, 5.0e6, 100.0];
+        let bt = Aabb {
+            min: [0, 1, 2].map(|i| b.min[i] + t[i]),
+            max: [0, 1, 2].map(|i| b.max[i] + t[i]),
+        };
+        let ct = Cube::around(&bt, 0.1);
+        assert_eq!(ct.size, c.size);
+        assert_eq!(ct.origin, [0, 1, 2].map(|i| c.origin[i] + t[i]));
+        for size in [1e-30, 0.75, 1.0, 255.9, 256.0, 1e30] {
+            let q = lattice_quantum(size);
+            assert!(128.0 * q <= size && size < 256.0 * q, "{size} {q}");
+        }
     }
 
     #[test]

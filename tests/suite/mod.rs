@@ -3,6 +3,8 @@ mod cli;
 mod colour;
 mod common;
 mod data;
+mod degenerate;
 mod ingest;
 mod normals;
+mod precision;
 mod recon;
