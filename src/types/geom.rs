@@ -84,13 +84,16 @@ impl Aabb {
 ///
 /// **Translation invariance.** [`Cube::around`] puts the cube on a lattice tied to its size,
 /// so that the same points translated by a vector `t` of lattice steps get the cube translated
-/// by exactly `t`: the edge is rounded up to 8 significant bits, `m·q` with `q` a power of
-/// two and `128 ≤ m ≤ 256`, and the lower corner down to a multiple of `q/16`. Every grid
-/// node and cell corner `origin + k·size/2^d` (up to depth `d` = 20) is then exact in `f64`
-/// wherever `|origin| / size < 2^24`, so a point's offset from any of them is exact too, and
+/// by exactly `t` (any `t` of whole multiples of `q`): the edge is rounded up to 16
+/// significant bits, `m·q` with `q` a power of two and `2^15 ≤ m ≤ 2^16`, and the lower corner
+/// down to a multiple of `q`. Every grid node and cell corner `origin + k·size/2^d` is then
+/// exact in `f64` wherever `|origin| / size < 2^(37 − d)` (`2^24` at the deepest supported
+/// depth, 13), so a point's offset from any of them is exact too, and
 /// everything downstream of the cube (plan, leaf grids, splats, tile fields, the iso-value)
-/// sees the same numbers for `P` and `P + t`. The corner moves by less than `size/2048`,
-/// well inside the margin.
+/// sees the same numbers for `P` and `P + t`. The edge grows by less than `2^-15` and the
+/// corner moves by less than `size/2^15`: the grids stay where they were to within a
+/// thousandth of a voxel (coarser rounding, 8 bits, moved them enough to flip marginal
+/// topology, two sheets 1.7 voxels apart).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Cube {
     /// Lower corner.
@@ -102,7 +105,7 @@ pub struct Cube {
 impl Cube {
     /// The cube around `b`, with edge the largest extent of `b` enlarged by `1 + margin`,
     /// rounded up and placed on its lattice (see [`Cube`]); centred on `b` to within
-    /// `size/2048`. A box of zero extent gets edge 1 so that cells have a size.
+    /// `size/2^15`. A box of zero extent gets edge 1 so that cells have a size.
     pub fn around(b: &Aabb, margin: f64) -> Cube {
         let e = b.extent();
         let mut size = e[0].max(e[1]).max(e[2]) * (1.0 + margin);
@@ -113,7 +116,7 @@ impl Cube {
         if q > 0.0 && (size / q).is_finite() {
             size = (size / q).ceil() * q;
         }
-        let step = q / 16.0;
+        let step = q;
         let mut origin = [0.0; 3];
         for i in 0..3 {
             let o = 0.5 * (b.min[i] + b.max[i]) - 0.5 * size;
@@ -157,14 +160,17 @@ impl Cube {
     }
 }
 
-/// The power of two `q` with `128·q ≤ size < 256·q` (0 where `size` is too small for one).
+/// Significant bits of the cube's edge: `2^15 ≤ size/q < 2^16`.
+const LATTICE_LOW: f64 = (1u64 << 15) as f64;
+
+/// The power of two `q` with `2^15·q ≤ size < 2^16·q` (0 where `size` is too small for one).
 fn lattice_quantum(size: f64) -> f64 {
-    let e = size.log2().floor() as i32 - 7;
+    let e = size.log2().floor() as i32 - 15;
     let q = 2f64.powi(e);
     // log2 may round across a power of two; correct by one step either way.
-    if 128.0 * q > size {
+    if LATTICE_LOW * q > size {
         q / 2.0
-    } else if 256.0 * q <= size {
+    } else if 2.0 * LATTICE_LOW * q <= size {
         q * 2.0
     } else {
         q
@@ -259,11 +265,12 @@ mod tests {
         };
         let c = Cube::around(&b, 0.1);
         let q = lattice_quantum(c.size);
-        assert!(c.size >= 1.1 * 40.864197511 && c.size <= 1.1 * 40.864197511 * (1.0 + 1.0 / 128.0));
+        let want = 1.1 * (40.9876543 - 0.123456789);
+        assert!(c.size >= want && c.size <= want * (1.0 + 1.0 / LATTICE_LOW));
         assert_eq!((c.size / q).fract(), 0.0);
         for i in 0..3 {
             assert!(c.origin[i] <= b.min[i] && c.origin[i] + c.size >= b.max[i]);
-            assert_eq!((c.origin[i] / (q / 16.0)).fract(), 0.0);
+            assert_eq!((c.origin[i] / q).fract(), 0.0);
         }
         let t = [5.0e6, 5.0e6, 100.0];
         let bt = Aabb {
@@ -275,7 +282,10 @@ mod tests {
         assert_eq!(ct.origin, [0, 1, 2].map(|i| c.origin[i] + t[i]));
         for size in [1e-30, 0.75, 1.0, 255.9, 256.0, 1e30] {
             let q = lattice_quantum(size);
-            assert!(128.0 * q <= size && size < 256.0 * q, "{size} {q}");
+            assert!(
+                LATTICE_LOW * q <= size && size < 2.0 * LATTICE_LOW * q,
+                "{size} {q}"
+            );
         }
     }
 

@@ -134,13 +134,26 @@ fn skip_invalid_drops_and_counts_invalid_normals() {
     assert_eq!(manifest["point_count"], 396);
 }
 
-/// Reconstruct the unit sphere scaled by `scale`; the mesh must be the unit sphere's, scaled:
-/// nonempty, finite, the right size.
-fn reconstructs_at(scale: f64) {
+/// Reconstruct the unit sphere scaled by `scale`, with its normals or estimating them; the mesh
+/// must be the unit sphere's, scaled: nonempty, finite, the right size.
+fn reconstructs_at(scale: f64, with_normals: bool) {
     let d = tempfile::tempdir().unwrap();
     let (pos, nrm) = sphere(4000);
     let pos: Vec<[f64; 3]> = pos.iter().map(|p| p.map(|v| v * scale)).collect();
-    let (ply, _) = write_oriented(&d.path().join("scaled.ply"), &pos, &nrm);
+    let ply = d.path().join("scaled.ply");
+    if with_normals {
+        write_oriented(&ply, &pos, &nrm);
+    } else {
+        let mut out = format!(
+            "ply\nformat binary_little_endian 1.0\nelement vertex {}\nproperty double x\nproperty double y\nproperty double z\nend_header\n",
+            pos.len()
+        )
+        .into_bytes();
+        for v in pos.iter().flatten() {
+            out.extend_from_slice(&v.to_le_bytes());
+        }
+        std::fs::write(&ply, out).unwrap();
+    }
     let out = d.path().join("mesh.ply");
     ok(&[
         "reconstruct",
@@ -163,10 +176,13 @@ fn reconstructs_at(scale: f64) {
 
 #[test]
 fn extreme_magnitudes_reconstruct_instead_of_giving_nan() {
-    // Extents near 1e-30: the solve works in units of the cube, never 1/h³ in input units.
-    reconstructs_at(1e-30);
+    // Extents near 1e-30: the solve works in units of the cube, never 1/h³ in input units, and
+    // normal estimation in units of each cell's edge.
+    reconstructs_at(1e-30, true);
+    reconstructs_at(1e-30, false);
     // Coordinates near 1e30.
-    reconstructs_at(1e30);
+    reconstructs_at(1e30, true);
+    reconstructs_at(1e30, false);
 }
 
 #[test]
