@@ -218,7 +218,8 @@ pub struct IngestArgs {
     /// Split cells until they hold at most this many points.
     #[arg(long, default_value_t = IngestParams::default().max_cell_points)]
     pub max_cell_points: u64,
-    /// Drop points with NaN/infinite coordinates (counted) instead of failing.
+    /// Drop points with NaN/infinite coordinates or NaN/infinite/zero normals (counted) instead
+    /// of failing.
     #[arg(long)]
     pub skip_invalid: bool,
     /// zstd level of cell files (-7 fastest .. 19 smallest).

@@ -18,18 +18,27 @@
 //! comment written by scanflow
 //! comment <spaces>
 //! element vertex N
-//! property float x
+//! property float x            (double x y z where float32 would lose the input's resolution)
 //! property float y
 //! property float z
 //! property uchar red          (red, green, blue only when created with colour)
 //! property uchar green
 //! property uchar blue
+//! property float scalar_intensity   (only when created with intensity)
 //! element face M
 //! property list uchar int vertex_indices
 //! end_header
 //! ```
 //!
-//! A vertex record is `x y z` as float32, then `red green blue` as uchar. A face record is the
+//! A vertex record is `x y z` as float32 (or float64, [`VertexFormat::double`]), then `red
+//! green blue` as uchar, then the intensity as float32. The intensity is named with
+//! CloudCompare's `scalar_` prefix, so CloudCompare shows it as a scalar field and MeshLab,
+//! which reads a vertex property called `intensity` as the colour (showing the mesh white),
+//! ignores it. **Precision** ([`VertexFormat::for_cube`]): float32 keeps 24 bits, so it is
+//! used only where its spacing at the largest coordinate of the cube is at most `2^-20` of the
+//! cube's edge (coordinates within about 8 edges of the origin: rounding below `5e-7` of the
+//! extent); georeferenced data (UTM metres, ~5e6, on a scan of tens of metres) gets `double`,
+//! which every PLY reader loads as is. A face record is the
 //! byte 3, then 3 vertex indices as 32-bit little-endian integers, declared `int` while the
 //! vertex count fits an `i32` and `uint` beyond (the bytes are the same for indices that fit
 //! both). Triangles are counter-clockwise seen from outside, as extracted
@@ -47,6 +56,50 @@ const BUF_BYTES: usize = 1 << 20;
 
 /// Bytes of one face record: the count byte and 3 indices.
 const FACE_BYTES: u64 = 1 + 3 * 4;
+
+/// What a vertex record carries besides its position, and the position's type.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct VertexFormat {
+    /// `red green blue` uchar.
+    pub color: bool,
+    /// `scalar_intensity` float32.
+    pub intensity: bool,
+    /// `x y z` as float64 instead of float32.
+    pub double: bool,
+}
+
+impl VertexFormat {
+    /// The largest float32 spacing, relative to the cube's edge, that keeps the input's
+    /// resolution (see the [module docs](self)).
+    pub const FLOAT_SPACING: f64 = 1.0 / (1u64 << 20) as f64;
+
+    /// The format for vertices inside the cube of lower corner `origin` and edge `size`:
+    /// [`VertexFormat::double`] where float32's spacing at the cube's largest coordinate
+    /// exceeds [`VertexFormat::FLOAT_SPACING`] of `size`.
+    pub fn for_cube(origin: [f64; 3], size: f64, color: bool, intensity: bool) -> VertexFormat {
+        let far = origin
+            .iter()
+            .map(|&o| o.abs().max((o + size).abs()))
+            .fold(0f64, f64::max);
+        // float32's spacing at `far`: 2^(e - 23) for far in [2^e, 2^(e+1)).
+        let spacing = if far > 0.0 && far.is_finite() {
+            2f64.powi(far.log2().floor() as i32 - 23)
+        } else {
+            0.0
+        };
+        let float_keeps_it = spacing <= Self::FLOAT_SPACING * size;
+        VertexFormat {
+            color,
+            intensity,
+            double: !float_keeps_it,
+        }
+    }
+
+    /// Bytes of one vertex record.
+    pub fn stride(&self) -> usize {
+        (if self.double { 24 } else { 12 }) + 3 * self.color as usize + 4 * self.intensity as usize
+    }
+}
 
 /// What [`MeshPlyWriter::finish`] wrote.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -73,9 +126,8 @@ pub struct MeshPlyWriter {
     out: Option<BufWriter<AtomicFile>>,
     /// The open face file; `None` once finished or after a failed write.
     faces: Option<BufWriter<File>>,
-    /// Whether vertices carry a colour.
-    with_color: bool,
-    with_intensity: bool,
+    /// What a vertex record holds.
+    format: VertexFormat,
     /// Vertices written.
     vertices: u64,
     /// Faces written.
@@ -85,24 +137,20 @@ pub struct MeshPlyWriter {
 }
 
 /// The header lines before the padding comment, and after it.
-fn header_parts(
-    vertices: u64,
-    faces: u64,
-    with_color: bool,
-    with_intensity: bool,
-) -> (String, String) {
+fn header_parts(vertices: u64, faces: u64, f: VertexFormat) -> (String, String) {
     let head = "ply\nformat binary_little_endian 1.0\ncomment written by scanflow\n".to_string();
     let mut tail = format!("element vertex {vertices}\n");
+    let ty = if f.double { "double" } else { "float" };
     for n in ["x", "y", "z"] {
-        tail.push_str(&format!("property float {n}\n"));
+        tail.push_str(&format!("property {ty} {n}\n"));
     }
-    if with_color {
+    if f.color {
         for n in ["red", "green", "blue"] {
             tail.push_str(&format!("property uchar {n}\n"));
         }
     }
-    if with_intensity {
-        tail.push_str("property float intensity\n");
+    if f.intensity {
+        tail.push_str("property float scalar_intensity\n");
     }
     let index = if vertices <= i32::MAX as u64 {
         "int"
@@ -118,16 +166,16 @@ fn header_parts(
 /// The padding line: `comment`, a space, spaces up to `len` bytes with its newline.
 const PAD_MIN: usize = "comment \n".len();
 
-/// Bytes reserved for the header of a file with or without colour.
-fn reserved_bytes(with_color: bool, with_intensity: bool) -> usize {
-    let (h, t) = header_parts(u64::MAX, u64::MAX, with_color, with_intensity);
+/// Bytes reserved for the header of a file of vertex format `f`.
+fn reserved_bytes(f: VertexFormat) -> usize {
+    let (h, t) = header_parts(u64::MAX, u64::MAX, f);
     h.len() + t.len() + PAD_MIN
 }
 
-/// The header for the given counts, padded to exactly `reserved_bytes(..)` bytes.
-fn header(vertices: u64, faces: u64, with_color: bool, with_intensity: bool) -> String {
-    let (head, tail) = header_parts(vertices, faces, with_color, with_intensity);
-    let pad = reserved_bytes(with_color, with_intensity) - head.len() - tail.len();
+/// The header for the given counts, padded to exactly `reserved_bytes(f)` bytes.
+fn header(vertices: u64, faces: u64, f: VertexFormat) -> String {
+    let (head, tail) = header_parts(vertices, faces, f);
+    let pad = reserved_bytes(f) - head.len() - tail.len();
     let mut h = head;
     h.push_str("comment");
     h.extend(std::iter::repeat_n(' ', pad - "comment\n".len()));
@@ -145,8 +193,19 @@ impl MeshPlyWriter {
         Self::create_with(path, with_color, false)
     }
 
-    /// As [`create`](Self::create), with a float `intensity` per vertex when `with_intensity`.
+    /// As [`create`](Self::create), with a float `scalar_intensity` per vertex when
+    /// `with_intensity`.
     pub fn create_with(path: &Path, with_color: bool, with_intensity: bool) -> Result<Self> {
+        let format = VertexFormat {
+            color: with_color,
+            intensity: with_intensity,
+            double: false,
+        };
+        Self::create_format(path, format)
+    }
+
+    /// As [`create`](Self::create), with vertex records of format `format`.
+    pub fn create_format(path: &Path, format: VertexFormat) -> Result<Self> {
         if path.as_os_str().is_empty() {
             return Err(Error::Usage("empty output file name".to_string()));
         }
@@ -159,18 +218,17 @@ impl MeshPlyWriter {
             faces_path: PathBuf::new(),
             out: Some(BufWriter::with_capacity(BUF_BYTES, file)),
             faces: None,
-            with_color,
-            with_intensity,
+            format,
             vertices: 0,
             faces_written: 0,
-            header_bytes: reserved_bytes(with_color, with_intensity),
+            header_bytes: reserved_bytes(format),
         };
         // From here on, a failure drops `w`, which removes the temporary files.
         let faces = atomic::create_temp_file(&faces_path)?;
         w.faces_path = faces_path;
         w.faces = Some(BufWriter::with_capacity(BUF_BYTES, faces));
         // A valid header for an empty mesh holds the room until `finish`.
-        let h = header(0, 0, with_color, with_intensity);
+        let h = header(0, 0, format);
         let tmp = &w.tmp_path;
         match w.out.as_mut() {
             Some(o) => o.write_all(h.as_bytes()).with_path(tmp)?,
@@ -196,7 +254,10 @@ impl MeshPlyWriter {
 
     /// Size of the header of every file written with or without colour, in bytes.
     pub fn header_bytes(with_color: bool) -> usize {
-        reserved_bytes(with_color, false)
+        reserved_bytes(VertexFormat {
+            color: with_color,
+            ..VertexFormat::default()
+        })
     }
 
     fn closed(&self) -> Error {
@@ -206,11 +267,12 @@ impl MeshPlyWriter {
         ))
     }
 
-    /// Append a vertex: `p` as float32, and `color` when the writer was created with colour
-    /// (a colour given to a writer without is ignored).
+    /// Append a vertex: `p` as float32 (float64 for a [`VertexFormat::double`] writer), and
+    /// `color` when the writer was created with colour (a colour given to a writer without is
+    /// ignored).
     ///
-    /// A coordinate that a float32 cannot hold, or a missing colour, is an [`Error::Usage`] and
-    /// writes nothing.
+    /// A coordinate that the vertex type cannot hold, or a missing colour, is an
+    /// [`Error::Usage`] and writes nothing.
     pub fn vertex(&mut self, p: [f64; 3], color: Option<[u8; 3]>) -> Result<()> {
         self.vertex_with(p, color, None)
     }
@@ -223,20 +285,34 @@ impl MeshPlyWriter {
         color: Option<[u8; 3]>,
         intensity: Option<f32>,
     ) -> Result<()> {
+        let double = self.format.double;
         for (axis, &v) in ["x", "y", "z"].iter().zip(&p) {
-            if !(v as f32).is_finite() {
+            if !(if double {
+                v.is_finite()
+            } else {
+                (v as f32).is_finite()
+            }) {
                 return Err(Error::Usage(format!(
-                    "{}: vertex {}: {axis} is {v}, which a float32 cannot hold",
+                    "{}: vertex {}: {axis} is {v}, which a {} cannot hold",
                     self.final_path.display(),
-                    self.vertices
+                    self.vertices,
+                    if double { "float64" } else { "float32" }
                 )));
             }
         }
-        let mut rec = [0u8; 19];
-        for d in 0..3 {
-            rec[4 * d..4 * d + 4].copy_from_slice(&(p[d] as f32).to_le_bytes());
-        }
-        let mut n = if self.with_color {
+        let mut rec = [0u8; 31];
+        let mut n = if double {
+            for d in 0..3 {
+                rec[8 * d..8 * d + 8].copy_from_slice(&p[d].to_le_bytes());
+            }
+            24
+        } else {
+            for d in 0..3 {
+                rec[4 * d..4 * d + 4].copy_from_slice(&(p[d] as f32).to_le_bytes());
+            }
+            12
+        };
+        if self.format.color {
             let Some(c) = color else {
                 return Err(Error::Usage(format!(
                     "{}: vertex {} has no colour, which the file was created with",
@@ -244,12 +320,10 @@ impl MeshPlyWriter {
                     self.vertices
                 )));
             };
-            rec[12..15].copy_from_slice(&c);
-            15
-        } else {
-            12
-        };
-        if self.with_intensity {
+            rec[n..n + 3].copy_from_slice(&c);
+            n += 3;
+        }
+        if self.format.intensity {
             let Some(i) = intensity else {
                 return Err(Error::Usage(format!(
                     "{}: vertex {} has no intensity, which the file was created with",
@@ -335,12 +409,7 @@ impl MeshPlyWriter {
                 self.faces_path.display()
             )));
         }
-        let h = header(
-            self.vertices,
-            self.faces_written,
-            self.with_color,
-            self.with_intensity,
-        );
+        let h = header(self.vertices, self.faces_written, self.format);
         if h.len() != self.header_bytes {
             return Err(Error::Internal(format!(
                 "{}: header of {} bytes does not fit the {} reserved",
@@ -352,7 +421,7 @@ impl MeshPlyWriter {
         file.seek(SeekFrom::Start(0)).with_path(&self.tmp_path)?;
         file.write_all(h.as_bytes()).with_path(&self.tmp_path)?;
         let bytes = file.metadata().with_path(&self.tmp_path)?.len();
-        let stride = 12 + 3 * self.with_color as u64 + 4 * self.with_intensity as u64;
+        let stride = self.format.stride() as u64;
         let expect = self.header_bytes as u64 + self.vertices * stride + face_bytes;
         if bytes != expect {
             return Err(Error::Internal(format!(
@@ -527,6 +596,41 @@ mod tests {
     }
 
     #[test]
+    fn utm_coordinates_are_written_as_doubles_with_scalar_intensity() {
+        // A 40 m cube at UTM-sized coordinates: float32 steps by 0.5 m there.
+        let utm = VertexFormat::for_cube([5.0e6, 5.0e6, 100.0], 40.0, true, true);
+        assert!(utm.double && utm.color && utm.intensity);
+        // Near the origin float32 keeps far more than the extent needs.
+        assert!(!VertexFormat::for_cube([-1.1, -1.1, -1.1], 2.2, false, false).double);
+        assert!(!VertexFormat::for_cube([1e-30; 3], 1e-30, false, false).double);
+        assert!(VertexFormat::for_cube([1e30; 3], 1.0, false, false).double);
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("utm.ply");
+        let mut w = MeshPlyWriter::create_format(&path, utm).unwrap();
+        let ps = [
+            [5.0e6 + 0.123456, 5.0e6 + 1.0, 100.25],
+            [5.0e6 + 2.0, 5.0e6 + 0.000001, 101.0],
+            [5.0e6, 5.0e6 + 3.5, 102.0],
+        ];
+        for (i, p) in ps.iter().enumerate() {
+            w.vertex_with(*p, Some([i as u8, 2, 3]), Some(0.5 * i as f32))
+                .unwrap();
+        }
+        w.triangle([0, 1, 2]).unwrap();
+        let stats = w.finish().unwrap();
+        let bytes = std::fs::read(&path).unwrap();
+        let hb = reserved_bytes(utm);
+        assert_eq!(stats.bytes as usize, hb + 3 * utm.stride() + 13);
+        let text = std::str::from_utf8(&bytes[..hb]).unwrap();
+        assert!(text.contains("property double x\nproperty double y\nproperty double z\n"));
+        assert!(text.contains("property float scalar_intensity\n"));
+        assert!(!text.contains(" intensity"));
+        let m = crate::io::mesh_read::read_mesh(&path).unwrap();
+        assert_eq!(m.vertices, ps.to_vec());
+        plyfile_check(&path, 3, 1);
+    }
+
+    #[test]
     fn empty_mesh_is_valid() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("e.ply");
@@ -545,8 +649,15 @@ mod tests {
         for color in [false, true] {
             let n = MeshPlyWriter::header_bytes(color);
             for (v, f) in [(0, 0), (4, 4), (1 << 31, 7), (u64::MAX, u64::MAX)] {
-                let h = header(v, f, color, false);
-                assert_eq!(header(v, f, color, true).len(), reserved_bytes(color, true));
+                let fmt = |intensity, double| VertexFormat {
+                    color,
+                    intensity,
+                    double,
+                };
+                let h = header(v, f, fmt(false, false));
+                for (i, d) in [(true, false), (false, true), (true, true)] {
+                    assert_eq!(header(v, f, fmt(i, d)).len(), reserved_bytes(fmt(i, d)));
+                }
                 assert_eq!(h.len(), n, "{v} {f}");
                 let want = if v <= i32::MAX as u64 {
                     " int "
@@ -555,8 +666,12 @@ mod tests {
                 };
                 assert!(h.contains(&format!("property list uchar{want}vertex_indices")));
             }
-            assert!(header(i32::MAX as u64, 1, color, false).contains("uchar int"));
-            assert!(header(i32::MAX as u64 + 1, 1, color, true).contains("uchar uint"));
+            let f = VertexFormat {
+                color,
+                ..VertexFormat::default()
+            };
+            assert!(header(i32::MAX as u64, 1, f).contains("uchar int"));
+            assert!(header(i32::MAX as u64 + 1, 1, f).contains("uchar uint"));
         }
     }
 

@@ -104,7 +104,8 @@ pub struct ChunkSpec {
 /// What reading a chunk produced besides the points.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct ChunkStats {
-    /// Points dropped because a coordinate was NaN or infinite (only with `skip_invalid`).
+    /// Points dropped because a coordinate was NaN or infinite, or the normal was not finite
+    /// or zero (only with `skip_invalid`).
     pub skipped_invalid: u64,
 }
 
@@ -135,8 +136,9 @@ pub trait PointReader: Send + Sync {
     /// Chunks cover every point exactly once.
     fn chunks(&self, target_points: u64) -> Result<Vec<ChunkSpec>>;
     /// Append the chunk's points to `out`, carrying the attributes of [`PointReader::attributes`].
-    /// A NaN or infinite coordinate is an error naming the element, or, with `skip_invalid`,
-    /// the point is dropped and counted.
+    /// A NaN or infinite coordinate, or a normal that is not finite or is zero
+    /// ([`invalid_normal_msg`]), is an error naming the element, or, with `skip_invalid`, the
+    /// point is dropped and counted.
     fn read_chunk(
         &self,
         chunk: &ChunkSpec,
@@ -297,6 +299,32 @@ pub fn non_finite_axis(p: [f64; 3]) -> Option<&'static str> {
 /// Message for a non-finite coordinate.
 pub fn non_finite_msg(axis: &str, v: f64) -> String {
     format!("{axis} is {v}, expected a finite coordinate (use --skip-invalid to drop such points)")
+}
+
+/// What is wrong with a point's normal `n` (as read, before it is narrowed to the store's
+/// float32), if anything: a component that is NaN, infinite or beyond float32's range, or a
+/// normal of zero length (after narrowing), which orients nothing and would splat nothing.
+/// The message names the component and suggests `--skip-invalid`.
+#[inline]
+pub fn invalid_normal_msg(n: [f64; 3]) -> Option<String> {
+    const HINT: &str = "(use --skip-invalid to drop such points)";
+    for (name, v) in ["nx", "ny", "nz"].into_iter().zip(n) {
+        if !v.is_finite() {
+            return Some(format!("{name} is {v}, expected a finite normal {HINT}"));
+        }
+        if !(v as f32).is_finite() {
+            return Some(format!(
+                "{name} is {v:e}, beyond float32's range, expected a finite normal {HINT}"
+            ));
+        }
+    }
+    if n.iter().all(|&v| v as f32 == 0.0) {
+        return Some(format!(
+            "normal is zero ({}, {}, {}), expected a nonzero normal {HINT}",
+            n[0], n[1], n[2]
+        ));
+    }
+    None
 }
 
 #[cfg(test)]

@@ -24,20 +24,34 @@ pub const NOISE_SAMPLE: usize = 1024;
 /// box still counts as possibly outside it despite rounding.
 const DK_SLACK: f64 = 1e-6;
 
-/// `p` relative to `c`, in f32 (a cell's points about its centre lose no digits that matter).
+/// `p` relative to `c`, times `inv` (a power of two, [`unit_inv`]), in f32: a cell's points
+/// about its centre lose no digits that matter, and in units of about the cell's edge their
+/// squared distances stay inside float32's range whatever the input's scale (an extent of
+/// 1e-30 would underflow to zero, one of 1e30 overflow to infinity).
 #[inline]
-pub fn rel(p: [f64; 3], c: [f64; 3]) -> [f32; 3] {
+pub fn rel(p: [f64; 3], c: [f64; 3], inv: f64) -> [f32; 3] {
     [
-        (p[0] - c[0]) as f32,
-        (p[1] - c[1]) as f32,
-        (p[2] - c[2]) as f32,
+        ((p[0] - c[0]) * inv) as f32,
+        ((p[1] - c[1]) * inv) as f32,
+        ((p[2] - c[2]) * inv) as f32,
     ]
+}
+
+/// The power of two nearest `1/edge`: scaling by it is exact, so a cell's fits are those of
+/// its points in units of about its edge (1 for cells of edge 0.71 to 1.41).
+pub fn unit_inv(edge: f64) -> f64 {
+    let inv = 2f64.powi(-(edge.log2().round() as i32));
+    if inv.is_finite() && inv > 0.0 {
+        inv
+    } else {
+        1.0
+    }
 }
 
 /// Points of other cells near a cell's box, relative to the cell's centre.
 #[derive(Debug, Default)]
 pub struct Halo {
-    /// Positions relative to the cell's centre.
+    /// Positions relative to the cell's centre, in the cell's units ([`rel`]).
     pub pos: Vec<[f32; 3]>,
     /// `(cell, index in that cell)` of each.
     pub origin: Vec<(u32, u32)>,
@@ -48,11 +62,13 @@ pub struct Halo {
 pub struct OwnFit {
     /// Neighbours per fit in this cell.
     pub k: usize,
-    /// Typical k-th neighbour distance in the cell.
+    /// Typical k-th neighbour distance in the cell, in the units of `rel`.
     pub typical: f32,
     /// Centre of the cell's box, the origin of `rel`.
     pub centre: [f64; 3],
-    /// The cell's points relative to `centre`.
+    /// The scale of `rel`, [`unit_inv`] of the cell's edge.
+    pub inv: f64,
+    /// The cell's points relative to `centre`, times `inv` ([`rel`]).
     pub rel: Vec<[f32; 3]>,
     /// Normal of each point, `None` until fitted or where no plane fits.
     pub normals: Vec<Option<[f32; 3]>>,
@@ -95,7 +111,8 @@ pub fn fit_own(pos: &[[f64; 3]], bx: &Aabb, params: &NormalParams) -> OwnFit {
     let centre = [0, 1, 2].map(|a| 0.5 * (bx.min[a] + bx.max[a]));
     let edge = bx.max[0] - bx.min[0];
     let n = pos.len();
-    let rel: Vec<[f32; 3]> = pos.iter().map(|p| rel(*p, centre)).collect();
+    let inv = unit_inv(edge);
+    let rel: Vec<[f32; 3]> = pos.iter().map(|p| rel(*p, centre, inv)).collect();
     let params = &NormalParams {
         k: if params.adaptive {
             cell_k(&rel, params.k)
@@ -118,7 +135,7 @@ pub fn fit_own(pos: &[[f64; 3]], bx: &Aabb, params: &NormalParams) -> OwnFit {
         let dk = if nb.len() < params.k {
             f64::INFINITY
         } else {
-            (nb[nb.len() - 1].0 as f64).sqrt() * (1.0 + DK_SLACK)
+            (nb[nb.len() - 1].0 as f64).sqrt() / inv * (1.0 + DK_SLACK)
         };
         if dk > b {
             boundary.push(i as u32);
@@ -132,6 +149,7 @@ pub fn fit_own(pos: &[[f64; 3]], bx: &Aabb, params: &NormalParams) -> OwnFit {
         k: params.k,
         typical,
         centre,
+        inv,
         rel,
         normals,
         nbrs,

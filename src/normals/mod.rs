@@ -333,7 +333,7 @@ fn gather_halo(cache: &mut CellCache, c: usize, f: &OwnFit, bx: &Aabb) -> Result
         let other = cache.get(o)?;
         for (k, p) in other.pos.iter().enumerate() {
             if reach.contains(*p) {
-                halo.pos.push(estimate::rel(*p, f.centre));
+                halo.pos.push(estimate::rel(*p, f.centre, f.inv));
                 halo.origin.push((o as u32, k as u32));
             }
         }

@@ -27,7 +27,7 @@ pub const WORK_STORE: &str = "store";
 pub struct IngestParams {
     /// Cells are split until they hold at most this many points.
     pub max_cell_points: u64,
-    /// Drop points with non-finite coordinates instead of failing.
+    /// Drop points with non-finite coordinates or non-finite or zero normals instead of failing.
     pub skip_invalid: bool,
     /// zstd level of cell files (see [`StoreParams::zstd_level`]).
     pub zstd_level: i32,

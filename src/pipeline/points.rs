@@ -24,9 +24,10 @@ const SORTED_INTENSITY_BYTES: u64 = 4;
 const SORTED_RANGE_BYTES: u64 = 24;
 /// Times [`PointSource::near_points`] doubles its margin while it finds no point.
 const NEAR_POINTS_WIDENINGS: usize = 6;
-/// A leaf solves the points of its cell scaled by 1.8 about its centre: 0.4 of the edge beyond
-/// each face.
-const LEAF_REACH: f64 = 0.4;
+/// A leaf solves the points of its cell scaled by 1.8125 about its centre: 13/32 of the edge
+/// beyond each face. A binary fraction, so that the box's faces lie on the cube's lattice
+/// (`types::Cube`): the same points translated are then in or out of it alike.
+const LEAF_REACH: f64 = 13.0 / 32.0;
 
 /// A store cell's points sorted by leaf cell.
 struct SortedCell {
@@ -298,7 +299,7 @@ impl<'a> PointSource<'a> {
         Ok(out)
     }
 
-    /// The points of leaf `key`'s 1.8× box, and how many of them (the first ones) lie in the
+    /// The points of leaf `key`'s 1.8125× box, and how many of them (the first ones) lie in the
     /// cell itself.
     pub fn gather(&mut self, key: CellKey) -> Result<LeafPoints> {
         let cell_box = self.plan.cube.cell_box(key);

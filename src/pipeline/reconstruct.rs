@@ -147,6 +147,7 @@ pub fn reconstruct(
         tiles_dir: &dirs.tiles,
         with_color,
         with_intensity,
+        input: &store.dir,
     };
     let ts = tiles::run(&job, points, out, ctx)?;
     Ok(ReconStats {
@@ -212,7 +213,9 @@ fn coarse_pass(store: &Store, plan: &Plan, ctx: &Ctx) -> Result<CoarsePass> {
     let stage = ctx.progress.stage("splat", Some(m.point_count), "points");
     let mut v = vec![[0f32; 3]; cgrid.len()];
     let mut occupied = BTreeSet::new();
-    let mut support = Support::new(plan.cube.origin, plan.coarse_spacing(), plan.coarse_cells());
+    // Relative to the cube's corner, as the tile meshes it trims (`pipeline::tiles`).
+    let origin = plan.cube.origin;
+    let mut support = Support::new([0.0; 3], plan.coarse_spacing(), plan.coarse_cells());
     let mut moments = Moments::new(m.bounds.min);
     let wave = 2 * ctx.threads();
     let ncells = m.cells.len();
@@ -232,7 +235,7 @@ fn coarse_pass(store: &Store, plan: &Plan, ctx: &Ctx) -> Result<CoarsePass> {
             let b = b?;
             fft_solve::splat(&cgrid, &b.pos, &b.normal, &mut v);
             for p in &b.pos {
-                support.mark(*p);
+                support.mark([0, 1, 2].map(|a| p[a] - origin[a]));
                 occupied.insert(CellKey::new(
                     plan.leaf_level,
                     plan.cube.cell_coords(*p, plan.leaf_level),
@@ -375,6 +378,14 @@ fn leaf_pass(
     } else {
         0.0
     };
+    if !iso.is_finite() {
+        return Err(Error::input(
+            &store.dir,
+            format!(
+                "no surface: the field's iso-value (its mean at the input points) is {iso}; the solve gave no usable field for these points"
+            ),
+        ));
+    }
     Ok(LeafPass {
         all: leaves,
         refined,

@@ -19,7 +19,7 @@ use crate::extract::cpu::McWorkspace;
 use crate::extract::field::BlendEval;
 use crate::extract::gpu::GpuExtractor;
 use crate::extract::weld::Welder;
-use crate::io::mesh_write::MeshPlyWriter;
+use crate::io::mesh_write::{MeshPlyWriter, VertexFormat};
 use crate::recon::checkpoint::{read_tile, tile_path, write_tile};
 use crate::recon::{CoarseField, Plan, leaves_near, pou, tile_blend};
 use crate::surface::{NearPoints, Support, trim_mesh};
@@ -62,6 +62,8 @@ pub struct TileJob<'a> {
     pub with_color: bool,
     /// Whether the output carries intensities.
     pub with_intensity: bool,
+    /// What errors about the input name (a reconstruction that finds no surface).
+    pub input: &'a Path,
 }
 
 /// What the tiles phase did.
@@ -93,8 +95,11 @@ pub fn run(job: &TileJob, points: SharedPoints, out: &Path, ctx: &Ctx) -> Result
     let plan = job.plan;
     let ntiles_axis = plan.fine_cells / plan.tile;
     let tiles_total = ntiles_axis.pow(3);
+    // The tiles work relative to the cube's lower corner (on its lattice, `types::Cube`), so
+    // that translated inputs give the same numbers; the writer adds the corner back.
+    let origin = plan.cube.origin;
     let geom = GridGeom {
-        origin: plan.cube.origin,
+        origin: [0.0; 3],
         h: plan.spacing,
         n: plan.fine_cells,
     };
@@ -103,11 +108,15 @@ pub fn run(job: &TileJob, points: SharedPoints, out: &Path, ctx: &Ctx) -> Result
         log::info!("extracting tiles on the GPU: {}", g.adapter_name());
     }
     // Both welder callbacks write to the one writer.
-    let writer = std::cell::RefCell::new(MeshPlyWriter::create_with(
-        out,
+    // Vertices are written in float32 only where it keeps the input's resolution (georeferenced
+    // coordinates get float64; see `io::mesh_write`).
+    let format = VertexFormat::for_cube(
+        plan.cube.origin,
+        plan.cube.size,
         job.with_color,
         job.with_intensity,
-    )?);
+    );
+    let writer = std::cell::RefCell::new(MeshPlyWriter::create_format(out, format)?);
     let mut welder = Welder::new();
     // Tiles in Morton order reuse the leaves of their neighbours: the cache keeps twice the
     // leaves of the last wave (the next wave's tiles are its neighbours), within its share of
@@ -160,7 +169,7 @@ pub fn run(job: &TileJob, points: SharedPoints, out: &Path, ctx: &Ctx) -> Result
                 last_tile,
                 |_, i, p| {
                     writer.borrow_mut().vertex_with(
-                        p,
+                        [0, 1, 2].map(|d| p[d] + origin[d]),
                         mesh.colors.get(i).copied(),
                         mesh.intensity.get(i).copied(),
                     )
@@ -175,7 +184,18 @@ pub fn run(job: &TileJob, points: SharedPoints, out: &Path, ctx: &Ctx) -> Result
     if gpu.is_some() {
         gpu_totals.log();
     }
-    let ws = writer.into_inner().finish()?;
+    let writer = writer.into_inner();
+    if writer.triangles() == 0 {
+        // Dropping the writer removes its temporary files: nothing appears under `out`.
+        return Err(Error::input(
+            job.input,
+            format!(
+                "no surface: the field never crosses its iso-value {} inside the cube, so the mesh would be empty (do the points and normals describe a surface? at depth {}, a voxel is {:e} across)",
+                job.iso, job.params.depth, plan.spacing
+            ),
+        ));
+    }
+    let ws = writer.finish()?;
     Ok(TileStats {
         vertices: ws.vertices,
         faces: ws.faces,
@@ -310,7 +330,10 @@ fn load_wave(
         near_pts.push(match points.as_ref() {
             Some(src) => {
                 let (a, b, margin) = near_box(plan, *lo);
-                Some(lock(src)?.near_points(a, b, margin)?)
+                Some(to_local(
+                    lock(src)?.near_points(a, b, margin)?,
+                    plan.cube.origin,
+                ))
             }
             None => None,
         });
@@ -369,7 +392,15 @@ fn fit_tile(
                 hi[a] = hi[a].max(v[a]);
             }
         }
-        let wide = lock(src)?.near_points(lo, hi, reach * (1.0 + 1e-9) + h * 1e-6)?;
+        let o = job.plan.cube.origin;
+        let (lo, hi) = (
+            [0, 1, 2].map(|a| lo[a] + o[a]),
+            [0, 1, 2].map(|a| hi[a] + o[a]),
+        );
+        let wide = to_local(
+            lock(src)?.near_points(lo, hi, reach * (1.0 + 1e-9) + h * 1e-6)?,
+            o,
+        );
         let (fixed, _) = wide.fit_vertices(&vs, h, fit);
         for (&vi, f) in inexact.iter().zip(fixed) {
             fits[vi] = f;
@@ -385,6 +416,21 @@ fn fit_tile(
         mesh.intensity = fits.iter().map(|f| f.intensity).collect();
     }
     Ok(())
+}
+
+/// Input points `p` (world) relative to the cube's corner `origin`, the frame of the tile
+/// meshes: exact on the cube's lattice, so translated inputs give the same numbers.
+fn to_local(mut p: NearPoints, origin: [f64; 3]) -> NearPoints {
+    for q in &mut p.pos {
+        for a in 0..3 {
+            q[a] -= origin[a];
+        }
+    }
+    for a in 0..3 {
+        p.lo[a] -= origin[a];
+        p.hi[a] -= origin[a];
+    }
+    p
 }
 
 /// Extract a wave on the CPU pool: blend, marching cubes, finish, in parallel.

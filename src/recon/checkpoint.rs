@@ -1,5 +1,5 @@
-//! The work directory's checkpoint formats: a leaf's detail (`SFLEAF02`) and a tile's mesh
-//! (`SFTILE04`), both zstd-compressed little-endian records written atomically, so that a
+//! The work directory's checkpoint formats: a leaf's detail (`SFLEAF03`) and a tile's mesh
+//! (`SFTILE05`, positions relative to the cube's lower corner), both zstd-compressed little-endian records written atomically, so that a
 //! killed run leaves each file whole or absent and a resumed run reuses what it finds.
 
 use std::path::{Path, PathBuf};
@@ -15,7 +15,7 @@ const ZSTD_LEVEL: i32 = 1;
 /// Leaf checkpoints: this magic, the cell key, the iso sum (f64) and count (u64), the detail's
 /// exponent (u32) and a flag (u32: 1 with a detail), then the detail's 16-bit values
 /// ([`quantise_detail`], padded to even), all little-endian, zstd-compressed.
-const LEAF_MAGIC: &[u8; 8] = b"SFLEAF02";
+const LEAF_MAGIC: &[u8; 8] = b"SFLEAF03";
 /// Bytes of a leaf checkpoint's header: magic (8), key (8), iso sum (8), iso count (8),
 /// exponent (4), detail flag (4).
 const LEAF_HEADER: usize = 40;
@@ -119,7 +119,7 @@ pub fn leaf_detail(dir: &Path, key: CellKey, m: usize) -> Result<Detail> {
 
 /// Tile checkpoints: this magic, then the counts of vertices, triangles, colours and
 /// intensities (u64 each), then the records ([`write_tile`]).
-const TILE_MAGIC: &[u8; 8] = b"SFTILE04";
+const TILE_MAGIC: &[u8; 8] = b"SFTILE05";
 /// Bytes of a tile checkpoint's header: magic and four counts.
 const TILE_HEADER: usize = 40;
 /// Bytes of a tile checkpoint's vertex: edge key (u64) and position (f64×3).

@@ -17,6 +17,13 @@
 //! 2.5 voxels apart). The forward transform is unnormalised; the inverse divides by
 //! `n³`. Node `i` of a grid sits at `origin + h·i` (values are node samples, never cell
 //! centres: reading them as cell centres shifts the surface by half a voxel).
+//!
+//! **Scale.** Lengths in these formulas (`h`, `k`) are measured in the grid's `unit` (the
+//! octree cube's edge for every grid of a run), not in input units: χ scales as
+//! `1/length²`, so in input units an input a few 1e-30 across gives `1/h³` beyond float32
+//! (NaN fields) and one 1e30 across gives zero. In cube units every input gives the same
+//! numbers as its scaled copy, and all grids of a run still share one continuous field.
+//! Positions enter only as offsets from a grid's origin, in input units.
 
 use std::sync::Arc;
 
@@ -34,6 +41,8 @@ pub struct LocalGrid {
     pub h: f64,
     /// Position of node (0, 0, 0).
     pub origin: [f64; 3],
+    /// The length unit of the solve, in world units (the cube's edge; see the module docs).
+    pub unit: f64,
 }
 
 impl LocalGrid {
@@ -94,7 +103,8 @@ pub fn solve(grid: &LocalGrid, pos: &[[f64; 3]], nrm: &[[f32; 3]], sigma_vox: f6
 pub fn splat(grid: &LocalGrid, pos: &[[f64; 3]], nrm: &[[f32; 3]], v: &mut [[f32; 3]]) {
     let n = grid.n;
     let inv_h = 1.0 / grid.h;
-    let scale = (inv_h * inv_h * inv_h) as f32;
+    let h_u = grid.h / grid.unit;
+    let scale = (1.0 / (h_u * h_u * h_u)) as f32;
     let ni = n as i64;
     for (p, nn) in pos.iter().zip(nrm) {
         // Per axis: the two node indices (wrapped) and their weights.
@@ -136,6 +146,7 @@ pub fn solve_splatted(grid: &LocalGrid, v: Vec<[f32; 3]>, sigma_vox: f64) -> Vec
 pub struct Solver {
     n: usize,
     h: f64,
+    unit: f64,
     r2c: Arc<dyn RealToComplex<f32>>,
     c2r: Arc<dyn ComplexToReal<f32>>,
     fwd: Arc<dyn Fft<f32>>,
@@ -154,8 +165,9 @@ impl Solver {
         let mut real_planner = RealFftPlanner::<f32>::new();
         let r2c = real_planner.plan_fft_forward(n);
         let c2r = real_planner.plan_fft_inverse(n);
-        let two_pi_over_l = 2.0 * std::f64::consts::PI / (n as f64 * grid.h);
-        let sigma = sigma_vox * grid.h;
+        let h_u = grid.h / grid.unit;
+        let two_pi_over_l = 2.0 * std::f64::consts::PI / (n as f64 * h_u);
+        let sigma = sigma_vox * h_u;
         let h1 = n / 2 + 1;
         // k² by folded index: m and n − m have the same |k|.
         let k2: Vec<f64> = (0..h1)
@@ -179,6 +191,7 @@ impl Solver {
         Solver {
             n,
             h: grid.h,
+            unit: grid.unit,
             r2c,
             c2r,
             fwd,
@@ -198,7 +211,7 @@ impl Solver {
     /// Solve from splatted normals (consumed) on `grid`, of this solver's size and spacing.
     pub fn solve_splatted(&self, grid: &LocalGrid, v: Vec<[f32; 3]>) -> Vec<f32> {
         assert!(
-            grid.n == self.n && grid.h == self.h,
+            grid.n == self.n && grid.h == self.h && grid.unit == self.unit,
             "a solver for {}³ nodes at spacing {} used on {}³ at {}",
             self.n,
             self.h,
@@ -207,7 +220,7 @@ impl Solver {
         );
         let n = self.n;
         let len = grid.len();
-        let half_inv_h = (0.5 / grid.h) as f32;
+        let half_inv_h = (0.5 * grid.unit / grid.h) as f32;
         // Divergence by central differences, then the splat is dropped: the solve peaks at the
         // splat plus the divergence (16 bytes a node); the transform itself needs about 8.
         let mut div = vec![0f32; len];
@@ -441,7 +454,7 @@ mod tests {
     fn reference_solve(grid: &LocalGrid, v: &[[f32; 3]], sigma_vox: f64) -> Vec<f32> {
         let n = grid.n;
         let at = |x: usize, y: usize, z: usize| (z * n + y) * n + x;
-        let half_inv_h = (0.5 / grid.h) as f32;
+        let half_inv_h = (0.5 * grid.unit / grid.h) as f32;
         let mut buf = vec![Complex32::new(0.0, 0.0); grid.len()];
         for z in 0..n {
             for y in 0..n {
@@ -457,8 +470,9 @@ mod tests {
         }
         let mut planner = FftPlanner::<f32>::new();
         fft3(&mut buf, n, &planner.plan_fft_forward(n));
-        let two_pi_over_l = 2.0 * std::f64::consts::PI / (n as f64 * grid.h);
-        let sigma = sigma_vox * grid.h;
+        let h_u = grid.h / grid.unit;
+        let two_pi_over_l = 2.0 * std::f64::consts::PI / (n as f64 * h_u);
+        let sigma = sigma_vox * h_u;
         let k2 = |m: usize| {
             let s = if m <= n / 2 {
                 m as f64
@@ -498,6 +512,7 @@ mod tests {
                 n,
                 h,
                 origin: [-1.0, 0.5, 2.0],
+                unit: 1.0,
             };
             let mut seed = 0x9e37_79b9_7f4a_7c15u64;
             let mut rnd = || {
@@ -533,6 +548,7 @@ mod tests {
             n,
             h: 2.0 / n as f64,
             origin: [-1.0; 3],
+            unit: 1.0,
         };
         let mut pos = Vec::new();
         let mut nrm = Vec::new();

@@ -40,6 +40,7 @@ pub fn global_field(
         n: n + 2 * pad,
         h,
         origin: cube.origin.map(|o| o - pad as f64 * h),
+        unit: cube.size,
     };
     let f = fft_solve::solve(&grid, pos, nrm, sigma_vox);
     let iso = pos.iter().map(|p| grid.eval(&f, *p)).sum::<f64>() / pos.len().max(1) as f64;

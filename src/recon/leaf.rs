@@ -7,7 +7,7 @@ use super::plan::Plan;
 use crate::recon::pou::quantise_detail;
 use crate::types::{CellKey, Detail};
 
-/// The points a leaf solves: those of its cell first, then those of the rest of its 1.8× box.
+/// The points a leaf solves: those of its cell first, then those of the rest of its 1.8125× box.
 #[derive(Debug, Default)]
 pub struct LeafPoints {
     /// Positions, world frame.
@@ -53,6 +53,7 @@ fn leaf_coarse_grid(plan: &Plan, fine: &LocalGrid) -> LocalGrid {
         n: fine.n / plan.coarse_ratio as usize,
         h: fine.h * plan.coarse_ratio as f64,
         origin: fine.origin,
+        unit: fine.unit,
     }
 }
 

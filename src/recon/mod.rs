@@ -19,7 +19,7 @@
 //!    coarse voxels at the supported depths, [`Plan::coarse_pad`]). Coarse node `J`
 //!    coincides with fine node `rJ`; it is upsampled trilinearly ([`coarse`]).
 //! 2. Each **leaf** (an occupied octree cell of `E = 8r` fine voxels, so the coarse voxel is
-//!    `E/8`) solves its points — those of the cell scaled by 1.8 about its centre — on a
+//!    `E/8`) solves its points — those of the cell scaled by 1.8125 about its centre — on a
 //!    periodic fine grid of `(2E)³` nodes (the cell embedded in a cube twice its size), and
 //!    on the coarse grid of the same domain, aligned to the global coarse grid ([`leaf`]).
 //!    Its **detail** is the difference, kept on the cell plus an overlap of `E/4` voxels.

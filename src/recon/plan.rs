@@ -173,6 +173,7 @@ impl Plan {
                 self.cube.origin[1] - o,
                 self.cube.origin[2] - o,
             ],
+            unit: self.cube.size,
         }
     }
 
@@ -190,6 +191,7 @@ impl Plan {
             n: 2 * self.leaf_voxels as usize,
             h: self.spacing,
             origin: self.node_pos([g[0] - half, g[1] - half, g[2] - half]),
+            unit: self.cube.size,
         }
     }
 
@@ -199,6 +201,7 @@ impl Plan {
             n: 2 * self.leaf_voxels as usize,
             h: self.spacing,
             origin: [0.0; 3],
+            unit: self.cube.size,
         }
         .scratch_bytes()
     }

@@ -25,7 +25,8 @@ pub struct Manifest {
     pub version: u32,
     /// Points stored.
     pub point_count: u64,
-    /// Points dropped for non-finite coordinates (`--skip-invalid`).
+    /// Points dropped for non-finite coordinates or normals that are not finite or are zero
+    /// (`--skip-invalid`).
     pub skipped_invalid: u64,
     /// Attributes of every record.
     pub attributes: Attributes,

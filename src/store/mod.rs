@@ -124,7 +124,8 @@ impl std::str::FromStr for NormalsMode {
 pub struct StoreParams {
     /// Cells are split until they hold at most this many points.
     pub max_cell_points: u64,
-    /// Drop points with non-finite coordinates instead of failing.
+    /// Drop points with non-finite coordinates, or normals that are not finite or are zero,
+    /// instead of failing.
     pub skip_invalid: bool,
     /// zstd level of cell files. The default, -1 (zstd's `--fast=1`), compresses twice as fast
     /// as level 1 for 6% larger cells (measured on 360 MB of sphere records: 0.74 s against
@@ -272,7 +273,7 @@ pub fn stage(inputs: &[InputSpec], out: &Path, params: &StoreParams, ctx: &Ctx) 
     if counted.bounds.is_empty() {
         return Err(Error::input(
             &inputs.specs[0].path,
-            "no valid points: every point has a non-finite coordinate",
+            "no valid points: every point has a non-finite coordinate or an invalid normal",
         ));
     }
     let count::Counted {

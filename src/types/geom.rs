@@ -81,6 +81,19 @@ impl Aabb {
 }
 
 /// A cube: the root of the octree.
+///
+/// **Translation invariance.** [`Cube::around`] puts the cube on a lattice tied to its size,
+/// so that the same points translated by a vector `t` of lattice steps get the cube translated
+/// by exactly `t` (any `t` of whole multiples of `q`): the edge is rounded up to 16
+/// significant bits, `m·q` with `q` a power of two and `2^15 ≤ m ≤ 2^16`, and the lower corner
+/// down to a multiple of `q`. Every grid node and cell corner `origin + k·size/2^d` is then
+/// exact in `f64` wherever `|origin| / size < 2^(37 − d)` (`2^24` at the deepest supported
+/// depth, 13), so a point's offset from any of them is exact too, and
+/// everything downstream of the cube (plan, leaf grids, splats, tile fields, the iso-value)
+/// sees the same numbers for `P` and `P + t`. The edge grows by less than `2^-15` and the
+/// corner moves by less than `size/2^15`: the grids stay where they were to within a
+/// thousandth of a voxel (coarser rounding, 8 bits, moved them enough to flip marginal
+/// topology, two sheets 1.7 voxels apart).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Cube {
     /// Lower corner.
@@ -90,17 +103,25 @@ pub struct Cube {
 }
 
 impl Cube {
-    /// The cube centred on `b`, with edge the largest extent of `b` enlarged by `1 + margin`.
-    /// A box of zero extent gets edge 1 so that cells have a size.
+    /// The cube around `b`, with edge the largest extent of `b` enlarged by `1 + margin`,
+    /// rounded up and placed on its lattice (see [`Cube`]); centred on `b` to within
+    /// `size/2^15`. A box of zero extent gets edge 1 so that cells have a size.
     pub fn around(b: &Aabb, margin: f64) -> Cube {
         let e = b.extent();
         let mut size = e[0].max(e[1]).max(e[2]) * (1.0 + margin);
         if size.is_nan() || size <= 0.0 || !size.is_finite() {
             size = 1.0;
         }
+        let q = lattice_quantum(size);
+        if q > 0.0 && (size / q).is_finite() {
+            size = (size / q).ceil() * q;
+        }
+        let step = q;
         let mut origin = [0.0; 3];
         for i in 0..3 {
-            origin[i] = 0.5 * (b.min[i] + b.max[i]) - 0.5 * size;
+            let o = 0.5 * (b.min[i] + b.max[i]) - 0.5 * size;
+            let snapped = (o / step).floor() * step;
+            origin[i] = if snapped.is_finite() { snapped } else { o };
         }
         Cube { origin, size }
     }
@@ -136,6 +157,23 @@ impl Cube {
             };
         }
         c
+    }
+}
+
+/// Significant bits of the cube's edge: `2^15 ≤ size/q < 2^16`.
+const LATTICE_LOW: f64 = (1u64 << 15) as f64;
+
+/// The power of two `q` with `2^15·q ≤ size < 2^16·q` (0 where `size` is too small for one).
+fn lattice_quantum(size: f64) -> f64 {
+    let e = size.log2().floor() as i32 - 15;
+    let q = 2f64.powi(e);
+    // log2 may round across a power of two; correct by one step either way.
+    if LATTICE_LOW * q > size {
+        q / 2.0
+    } else if 2.0 * LATTICE_LOW * q <= size {
+        q * 2.0
+    } else {
+        q
     }
 }
 
@@ -217,6 +255,38 @@ mod tests {
         assert_eq!(c.cell_coords([2.0, 1.5, -0.5], 1), [1, 1, 0]);
         let bx = c.cell_box(CellKey::new(1, [1, 0, 0]));
         assert_eq!(bx.min, [1.0, -0.5, -0.5]);
+    }
+
+    #[test]
+    fn cube_is_on_its_lattice_and_translates_exactly() {
+        let b = Aabb {
+            min: [0.123456789, -3.75, 2.0],
+            max: [40.9876543, 11.5, 9.25],
+        };
+        let c = Cube::around(&b, 0.1);
+        let q = lattice_quantum(c.size);
+        let want = 1.1 * (40.9876543 - 0.123456789);
+        assert!(c.size >= want && c.size <= want * (1.0 + 1.0 / LATTICE_LOW));
+        assert_eq!((c.size / q).fract(), 0.0);
+        for i in 0..3 {
+            assert!(c.origin[i] <= b.min[i] && c.origin[i] + c.size >= b.max[i]);
+            assert_eq!((c.origin[i] / q).fract(), 0.0);
+        }
+        let t = [5.0e6, 5.0e6, 100.0];
+        let bt = Aabb {
+            min: [0, 1, 2].map(|i| b.min[i] + t[i]),
+            max: [0, 1, 2].map(|i| b.max[i] + t[i]),
+        };
+        let ct = Cube::around(&bt, 0.1);
+        assert_eq!(ct.size, c.size);
+        assert_eq!(ct.origin, [0, 1, 2].map(|i| c.origin[i] + t[i]));
+        for size in [1e-30, 0.75, 1.0, 255.9, 256.0, 1e30] {
+            let q = lattice_quantum(size);
+            assert!(
+                LATTICE_LOW * q <= size && size < 2.0 * LATTICE_LOW * q,
+                "{size} {q}"
+            );
+        }
     }
 
     #[test]

@@ -69,14 +69,15 @@ impl GridGeom {
     }
 }
 
-/// One tile's mesh: vertex `i` lies on grid edge `keys[i]` at `positions[i]` (world
-/// coordinates, input units); triangles index into them, wound as in the
-/// conventions of the `extract` module.
+/// One tile's mesh: vertex `i` lies on grid edge `keys[i]` at `positions[i]` (in the frame of
+/// its [`GridGeom`], input units: the pipeline's grid starts at zero, the cube's corner, which
+/// the writer adds back); triangles index into them, wound as in the conventions of the
+/// `extract` module.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct TileMesh {
     /// The grid edge of each vertex; no key appears twice.
     pub keys: Vec<EdgeKey>,
-    /// World position of each vertex.
+    /// Position of each vertex, in the grid's frame.
     pub positions: Vec<[f64; 3]>,
     /// Triangles, as indices into `keys` and `positions`.
     pub triangles: Vec<[u32; 3]>,

@@ -4,7 +4,7 @@
 use super::{Field, PlyReader, Scalar};
 use crate::error::{Error, Location, Result};
 use crate::io::mmap::Window;
-use crate::io::{ChunkSpec, ChunkStats, non_finite_axis, non_finite_msg};
+use crate::io::{ChunkSpec, ChunkStats, invalid_normal_msg, non_finite_axis, non_finite_msg};
 use crate::types::PointBatch;
 
 impl PlyReader {
@@ -78,6 +78,23 @@ impl PlyReader {
                         byte: self.vertex_start + index * self.stride as u64,
                     },
                     non_finite_msg(axis, v),
+                ));
+            }
+            if let Some([a, b, c]) = l.normal
+                && let Some(msg) = invalid_normal_msg([get(rec, a), get(rec, b), get(rec, c)])
+            {
+                if skip_invalid {
+                    stats.skipped_invalid += 1;
+                    continue;
+                }
+                let index = chunk.first_index + i as u64;
+                return Err(Error::format(
+                    &self.path,
+                    Location::Element {
+                        index,
+                        byte: self.vertex_start + index * self.stride as u64,
+                    },
+                    msg,
                 ));
             }
             out.pos.push(p);
@@ -190,6 +207,22 @@ impl PlyReader {
                         line: line_no,
                     },
                     non_finite_msg(axis, v),
+                ));
+            }
+            if let Some([a, b, c]) = self.layout.normal
+                && let Some(msg) = invalid_normal_msg([vals[a.at], vals[b.at], vals[c.at]])
+            {
+                if skip_invalid {
+                    stats.skipped_invalid += 1;
+                    continue;
+                }
+                return Err(Error::format(
+                    &self.path,
+                    Location::ElementLine {
+                        index,
+                        line: line_no,
+                    },
+                    msg,
                 ));
             }
             out.pos.push(p);

@@ -6,7 +6,7 @@ use super::text::{
 };
 use crate::error::{Error, Location, Result};
 use crate::io::mmap::Window;
-use crate::io::{ChunkSpec, ChunkStats, non_finite_axis, non_finite_msg};
+use crate::io::{ChunkSpec, ChunkStats, invalid_normal_msg, non_finite_axis, non_finite_msg};
 use crate::types::PointBatch;
 
 impl XyzReader {
@@ -105,6 +105,23 @@ impl XyzReader {
                         line: this_line,
                     },
                     non_finite_msg(axis, v),
+                ));
+            }
+            if let Some(at) = layout.normal_at()
+                && let Some(msg) = invalid_normal_msg([vals[at], vals[at + 1], vals[at + 2]])
+            {
+                if skip_invalid {
+                    stats.skipped_invalid += 1;
+                    index += 1;
+                    continue;
+                }
+                return Err(Error::format(
+                    &self.path,
+                    Location::ElementLine {
+                        index,
+                        line: this_line,
+                    },
+                    msg,
                 ));
             }
             out.pos.push(p);
