@@ -86,8 +86,9 @@ fn fifo_device_and_directory_inputs_are_named_by_type() {
     let fifo = d.path().join("pipe.ply");
     let made = std::process::Command::new("mkfifo").arg(&fifo).status();
     if matches!(made, Ok(st) if st.success()) {
-        for cmd in ["ingest", "reconstruct"] {
-            let err = fails_promptly(&[cmd, s(&fifo), "-o", s(&out), "--progress", "none"]);
+        let mesh = d.path().join("out.ply");
+        for (cmd, out) in [("ingest", &out), ("reconstruct", &mesh)] {
+            let err = fails_promptly(&[cmd, s(&fifo), "-o", s(out), "--progress", "none"]);
             assert!(
                 err.contains("pipe.ply: not a regular file (a FIFO)"),
                 "{err}"
