@@ -9,15 +9,19 @@ use crate::store::cell_file::batch_bounds;
 use crate::store::input::Inputs;
 use crate::types::{Aabb, Cube, PointBatch};
 
-/// The sample reads about one chunk in this many...
+/// Points per sample window: the smallest chunk the budget ever sizes, so a window always fits
+/// where a chunk does. Fixed, so that the sample, and the cube, never depend on the budget or
+/// the number of threads.
+pub const SAMPLE_WINDOW_POINTS: u64 = crate::store::MIN_CHUNK_POINTS;
+/// The sample reads about one window in this many...
 pub const SAMPLE_ONE_IN: usize = 64;
-/// ...and at least this many chunks (fewer only when the inputs have fewer).
-pub const SAMPLE_MIN_CHUNKS: usize = 8;
+/// ...and at least this many windows (fewer only when the inputs have fewer).
+pub const SAMPLE_MIN_CHUNKS: usize = 64;
 
 /// The provisional bounds: the headers' where every input has them (LAS, no read at all),
-/// else the bounds of a deterministic sample of about one chunk in [`SAMPLE_ONE_IN`] (every
-/// `stride`-th chunk and the last one), read in parallel. Each chunk in flight holds
-/// `chunk_bytes` of the budget.
+/// else the bounds of a deterministic sample of about one window in [`SAMPLE_ONE_IN`] (every
+/// `stride`-th window and the last one) of `chunks` (windows of [`SAMPLE_WINDOW_POINTS`]),
+/// read in parallel. Each window in flight holds `chunk_bytes` of the budget.
 pub fn provisional(
     inputs: &Inputs,
     chunks: &[(usize, ChunkSpec)],

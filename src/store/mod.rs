@@ -11,7 +11,9 @@
 //! every input point, each a parallel map over chunks of the memory-mapped inputs:
 //!
 //! 1. **bounds** ([`bounds`]): the provisional box, from the headers where every input has
-//!    them (LAS; no read), else from a fixed sample of about 1/64 of the chunks;
+//!    them (LAS; no read), else from a fixed sample of about 1/64 of the points, in windows
+//!    of a fixed size (not the budget-sized chunks, so that the cube does not depend on
+//!    `--threads` or `--mem`);
 //! 2. **count** ([`count`]): each point's cell on a counting grid of `8^L` cells over the cube
 //!    around the provisional box, `L` sized from the point count ([`octree::count_levels`])
 //!    and the budget, while the exact bounds are measured and every coordinate checked
@@ -254,7 +256,11 @@ pub fn stage(inputs: &[InputSpec], out: &Path, params: &StoreParams, ctx: &Ctx) 
     let input_bytes = inputs.input_bytes();
 
     // Pass 1: bounds.
-    let provisional = bounds::provisional(&inputs, &chunks, sizes.chunk_bytes, ctx)?;
+    // The sample is cut in windows of a fixed size, not in the budget-sized chunks, so that
+    // the cube (and every byte after it) is the same for any --threads and --mem.
+    let windows = inputs.chunks(bounds::SAMPLE_WINDOW_POINTS)?;
+    let window_bytes = bounds::SAMPLE_WINDOW_POINTS * CHUNK_BYTES_PER_POINT;
+    let provisional = bounds::provisional(&inputs, &windows, window_bytes, ctx)?;
 
     // Pass 2: count (and exact bounds), cut into the hierarchy.
     let levels = octree::count_levels(inputs.total, params.max_cell_points, sizes.max_levels);
