@@ -352,7 +352,12 @@ fn fit_tile(
     cp: &NearPoints,
 ) -> Result<()> {
     let (h, fit) = (job.plan.spacing, job.params.fit);
-    let (mut fits, inexact) = cp.fit_vertices(&mesh.positions, h, fit);
+    let geom = GridGeom {
+        origin: job.plan.cube.origin,
+        h,
+        n: job.plan.fine_cells,
+    };
+    let (mut fits, inexact) = cp.fit_vertices(&mesh.positions, &mesh.keys, &geom, fit);
     // Vertices whose neighbours may lie beyond the gathered box: their true neighbours lie
     // within their current farthest one, so one wider gather around them is exact (rare:
     // vertices far from every point).
@@ -361,6 +366,7 @@ fn fit_tile(
         let mut lo = [f64::INFINITY; 3];
         let mut hi = [f64::NEG_INFINITY; 3];
         let vs: Vec<[f64; 3]> = inexact.iter().map(|&i| mesh.positions[i]).collect();
+        let ks: Vec<EdgeKey> = inexact.iter().map(|&i| mesh.keys[i]).collect();
         for v in &vs {
             for a in 0..3 {
                 lo[a] = lo[a].min(v[a]);
@@ -368,7 +374,7 @@ fn fit_tile(
             }
         }
         let wide = lock(src)?.near_points(lo, hi, reach * (1.0 + 1e-9) + h * 1e-6)?;
-        let (fixed, _) = wide.fit_vertices(&vs, h, fit);
+        let (fixed, _) = wide.fit_vertices(&vs, &ks, &geom, fit);
         for (&vi, f) in inexact.iter().zip(fixed) {
             fits[vi] = f;
         }

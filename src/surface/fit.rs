@@ -3,6 +3,7 @@
 
 use super::colour::{COLOUR_NEIGHBOURS, blend_colour};
 use super::point_grid::PointGrid;
+use crate::types::{EdgeKey, GridGeom};
 
 /// Input points whose plane a vertex is moved onto (`fit`).
 pub const FIT_NEIGHBOURS: usize = 20;
@@ -10,6 +11,12 @@ pub const FIT_NEIGHBOURS: usize = 20;
 /// Extra neighbours gathered beyond those used, so that ties at the last place are seen and
 /// broken alike.
 const TIE_NEIGHBOURS: usize = 2;
+
+/// How close to either end of its grid edge a fitted vertex may come, in edge lengths (at
+/// least; more where float32 output could not tell the vertex from the end, see
+/// [`edge_margin`]). Keeps every triangle's corners inside three distinct edges of its cell,
+/// so no triangle collapses ([module docs](super)).
+pub const EDGE_MARGIN: f64 = 0.01;
 
 /// The cell of the [`PointGrid`] a tile's points are bucketed in, in fine voxels (a start:
 /// the grid adapts it to the points' density).
@@ -47,17 +54,21 @@ pub struct VertexFit {
 }
 
 impl NearPoints {
-    /// For each vertex: its position moved onto the plane of its [`FIT_NEIGHBOURS`] nearest
-    /// input points (when `fit`, [`project`]), and its colour and intensity
-    /// ([`blend_colour`]). Neighbours are ordered by distance, then position, then colour, so
-    /// the answer depends only on the point set. Also returns the vertices whose answer may
-    /// not be exact: their farthest neighbour lies beyond the gathered box's faces.
+    /// For each vertex (at `vertices[i]` on grid edge `keys[i]` of `geom`): its position moved
+    /// along its edge toward the plane of its [`FIT_NEIGHBOURS`] nearest input points (when
+    /// `fit`, [`project`]), and its colour and intensity ([`blend_colour`]). Neighbours are
+    /// ordered by distance, then position, then colour, so the answer depends only on the
+    /// point set and the vertex. Also returns the vertices whose answer may not be exact:
+    /// their farthest neighbour lies beyond the gathered box's faces.
     pub fn fit_vertices(
         &self,
         vertices: &[[f64; 3]],
-        h: f64,
+        keys: &[EdgeKey],
+        geom: &GridGeom,
         fit: bool,
     ) -> (Vec<VertexFit>, Vec<usize>) {
+        debug_assert_eq!(vertices.len(), keys.len());
+        let h = geom.h;
         if self.pos.is_empty() {
             let out = vertices
                 .iter()
@@ -81,8 +92,9 @@ impl NearPoints {
         let mut found = Vec::with_capacity(k);
         let out = vertices
             .iter()
+            .zip(keys)
             .enumerate()
-            .map(|(vi, v)| {
+            .map(|(vi, (v, key))| {
                 grid.nearest(*v, k, &mut found);
                 let nb = self.neighbours(&found, want);
                 let reach = nb.last().map_or(0.0, |x| x.0.sqrt());
@@ -93,7 +105,16 @@ impl NearPoints {
                     inexact.push(vi);
                 }
                 let (color, intensity) = blend_colour(&nb, h);
-                let pos = if fit { project(*v, &nb, h) } else { *v };
+                let pos = if fit {
+                    let (node, axis) = geom.decode_edge(*key);
+                    let a = axis as usize;
+                    let mut up = node;
+                    up[a] += 1;
+                    let edge = [geom.node_position(node)[a], geom.node_position(up)[a]];
+                    project(*v, a, edge, &nb, h)
+                } else {
+                    *v
+                };
                 VertexFit {
                     pos,
                     color,
@@ -126,13 +147,30 @@ impl NearPoints {
     }
 }
 
-/// `v` moved onto the plane of its neighbours `nb` (nearest first; fine spacing `h`): the
-/// one-step MLS projection of the [module docs](super), left alone when fewer than 3
-/// neighbours, the nearest beyond two voxels, or the plane beyond two voxels, and shrunk by
-/// what twice the standard error of the plane's offset explains.
-pub fn project(v: [f64; 3], nb: &[Neighbour], h: f64) -> [f64; 3] {
+/// `v`, a vertex on the grid edge along `axis` from coordinate `edge[0]` to `edge[1]`, moved
+/// along that edge toward the plane of its neighbours `nb` (nearest first; fine spacing `h`):
+/// the one-step MLS projection of the [module docs](super), to where the edge meets the
+/// plane, shrunk by what twice the standard error of the plane's offset explains, and kept
+/// within the edge by [`edge_margin`]. Not moved (only kept within the edge) when fewer than
+/// 3 neighbours, the nearest beyond two voxels, or the plane beyond two voxels.
+pub fn project(v: [f64; 3], axis: usize, edge: [f64; 2], nb: &[Neighbour], h: f64) -> [f64; 3] {
+    let step = edge_step(v, axis, nb, h);
+    let mut p = v;
+    p[axis] = clamp_to_edge(
+        if step.is_nan() {
+            v[axis]
+        } else {
+            v[axis] + step
+        },
+        edge,
+    );
+    p
+}
+
+/// How far along `axis` the vertex `v` moves toward its neighbours' plane (see [`project`]).
+fn edge_step(v: [f64; 3], axis: usize, nb: &[Neighbour], h: f64) -> f64 {
     if nb.len() < 3 || nb[0].0 > 4.0 * h * h {
-        return v;
+        return 0.0;
     }
     let n = nb.len() as f64;
     let mut c = [0f64; 3];
@@ -151,49 +189,198 @@ pub fn project(v: [f64; 3], nb: &[Neighbour], h: f64) -> [f64; 3] {
     let nrm = e.eigenvectors.column(i);
     let off = (v[0] - c[0]) * nrm[0] + (v[1] - c[1]) * nrm[1] + (v[2] - c[2]) * nrm[2];
     let se = e.eigenvalues[i].max(0.0).sqrt() / n;
-    if off.abs() > 2.0 * h {
-        return v;
+    if off.abs() > 2.0 * h || off == 0.0 {
+        return 0.0;
     }
-    // Shrunk toward zero by how much of it the plane's error could explain.
-    let step = if off == 0.0 {
-        0.0
+    // The offset to remove, shrunk toward zero by how much of it the plane's error could
+    // explain; along the edge the offset changes by `nrm[axis]` a unit (an edge parallel to
+    // the plane gives an infinite step, which the edge's ends stop).
+    let step = off * (1.0 - (2.0 * se / off).powi(2)).max(0.0);
+    if step == 0.0 { 0.0 } else { -step / nrm[axis] }
+}
+
+/// The margin, in input units, that keeps a vertex inside the grid edge `edge` (its two end
+/// coordinates along the edge): [`EDGE_MARGIN`] of the edge, or two float32 units in the
+/// last place of the larger end if more, so that the vertex written as float32 is still
+/// strictly inside the edge written as float32 (rounding to nearest is monotone).
+pub fn edge_margin(edge: [f64; 2]) -> f64 {
+    let big = edge[0].abs().max(edge[1].abs()) as f32;
+    let ulp = if big.is_finite() {
+        (f32::from_bits(big.to_bits() + 1) - big) as f64
     } else {
-        off * (1.0 - (2.0 * se / off).powi(2)).max(0.0)
+        0.0
     };
-    [0, 1, 2].map(|a| v[a] - step * nrm[a])
+    (EDGE_MARGIN * (edge[1] - edge[0])).max(2.0 * ulp)
+}
+
+/// `x` clamped to the grid edge `edge` less [`edge_margin`] at both ends (the edge's middle
+/// when the margins meet).
+fn clamp_to_edge(x: f64, edge: [f64; 2]) -> f64 {
+    let m = edge_margin(edge);
+    let (lo, hi) = (edge[0] + m, edge[1] - m);
+    if lo >= hi {
+        0.5 * (edge[0] + edge[1])
+    } else {
+        x.clamp(lo, hi)
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use rand::{Rng, SeedableRng};
+
+    /// Precise points on the plane `z = slope·x`, about the origin.
+    fn plane_points(slope: f64) -> Vec<Neighbour> {
+        let mut nb: Vec<Neighbour> = Vec::new();
+        for i in 0..5 {
+            for j in 0..4 {
+                let (x, y) = (i as f64 * 0.004 - 0.008, j as f64 * 0.004 - 0.006);
+                let p = [x, y, slope * x];
+                nb.push((x * x + y * y + p[2] * p[2], p, [0; 3], 0.0));
+            }
+        }
+        nb.sort_by(|a, b| a.0.total_cmp(&b.0));
+        nb
+    }
 
     #[test]
     fn projection_follows_precise_points_and_ignores_noise() {
         let h = 0.01;
-        // Precise points on z = 0: a vertex 0.3 voxel above moves onto the plane.
-        let mut nb: Vec<Neighbour> = Vec::new();
-        for i in 0..5 {
-            for j in 0..4 {
-                let p = [i as f64 * 0.004 - 0.008, j as f64 * 0.004 - 0.006, 0.0];
-                nb.push((p[0] * p[0] + p[1] * p[1], p, [0; 3], 0.0));
-            }
-        }
-        nb.sort_by(|a, b| a.0.total_cmp(&b.0));
-        let v = project([0.0, 0.0, 0.003], &nb, h);
+        let edge = [-0.005, 0.005];
+        // Precise points on z = 0: a vertex 0.3 voxel above, on a z edge, moves onto the plane.
+        let nb = plane_points(0.0);
+        let v = project([0.0, 0.0, 0.003], 2, edge, &nb, h);
         assert!(v[2].abs() < 1e-9, "{v:?}");
         // Too far from every point (more than two voxels): left alone.
         let far: Vec<_> = nb.iter().map(|x| (x.0 + 1.0, x.1, x.2, x.3)).collect();
-        assert_eq!(project([0.0, 0.0, 0.003], &far, h), [0.0, 0.0, 0.003]);
-        // Noisy points: an offset within the plane's error is not followed.
+        assert_eq!(
+            project([0.0, 0.0, 0.003], 2, edge, &far, h),
+            [0.0, 0.0, 0.003]
+        );
+        // Noisy points (a checkerboard of ±0.4 voxel about z = 0): an offset within the
+        // plane's error is not followed.
         let noisy: Vec<_> = nb
             .iter()
-            .enumerate()
-            .map(|(i, x)| {
-                let z = if i % 2 == 0 { 0.004 } else { -0.004 };
+            .map(|x| {
+                let cell = ((x.1[0] / 0.004).round() + (x.1[1] / 0.004).round()) as i64;
+                let z = if cell % 2 == 0 { 0.004 } else { -0.004 };
                 (x.0, [x.1[0], x.1[1], z], x.2, x.3)
             })
             .collect();
-        let v = project([0.0, 0.0, 0.0015], &noisy, h);
+        let v = project([0.0, 0.0, 0.0015], 2, edge, &noisy, h);
         assert!(v[2] > 0.0015 * 0.5, "{v:?}");
+    }
+
+    #[test]
+    fn fitted_vertex_moves_along_its_edge_to_the_plane() {
+        let h = 0.01;
+        // Plane z = x/2; the x edge at y = 0, z = 0.001 meets it at x = 0.002.
+        let nb = plane_points(0.5);
+        let v = project([-0.003, 0.0, 0.001], 0, [-0.005, 0.005], &nb, h);
+        assert!((v[0] - 0.002).abs() < 1e-9, "{v:?}");
+        assert_eq!((v[1], v[2]), (0.0, 0.001));
+        // A plane parallel to the edge: the vertex stops short of the edge's end.
+        let nb = plane_points(0.0);
+        let v = project([0.001, 0.0, -0.002], 0, [-0.005, 0.005], &nb, h);
+        assert!(v[0].abs() <= 0.005 - EDGE_MARGIN * h, "{v:?}");
+        assert_eq!((v[1], v[2]), (0.0, -0.002));
+    }
+
+    #[test]
+    fn fitted_vertex_never_leaves_its_edge() {
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(15);
+        let h = 0.01;
+        for _ in 0..2000 {
+            let slope = rng.random_range(-20.0..20.0);
+            let nb = plane_points(slope);
+            let axis = rng.random_range(0..3usize);
+            let lo = rng.random_range(-0.02..0.01);
+            let edge = [lo, lo + h];
+            let mut v = [0.0; 3].map(|_: f64| rng.random_range(-0.01..0.01));
+            // On the edge, ends included (marching cubes may put a vertex on a node).
+            v[axis] = lo + h * rng.random_range(0.0..=1.0);
+            let p = project(v, axis, edge, &nb, h);
+            let m = EDGE_MARGIN * h;
+            assert!(p[axis] >= lo + m && p[axis] <= lo + h - m, "{v:?} -> {p:?}");
+            for a in (0..3).filter(|&a| a != axis) {
+                assert_eq!(p[a], v[a]);
+            }
+        }
+    }
+
+    #[test]
+    fn edge_margin_covers_float32_rounding_far_from_the_origin() {
+        // Feet near 6e5: float32 steps are 1/16, more than 1% of a 2-foot edge.
+        let edge = [600_000.0, 600_002.0];
+        let m = edge_margin(edge);
+        assert!(m >= 2.0 * 0.0625, "{m}");
+        let (a, b) = (clamp_to_edge(-1e300, edge), clamp_to_edge(1e300, edge));
+        assert!((edge[0] as f32) < a as f32 && (b as f32) < edge[1] as f32);
+        // Near the origin the margin is EDGE_MARGIN of the edge.
+        assert_eq!(edge_margin([0.0, 0.01]), EDGE_MARGIN * 0.01);
+        // An edge shorter than float32 can resolve: its middle.
+        assert_eq!(clamp_to_edge(7.0, [1e7, 1e7 + 0.1]), 1e7 + 0.05);
+    }
+
+    /// Twice the area of the triangle `c` in f64.
+    fn double_area(c: [[f64; 3]; 3]) -> f64 {
+        let (u, w) = (
+            [0, 1, 2].map(|a| c[1][a] - c[0][a]),
+            [0, 1, 2].map(|a| c[2][a] - c[0][a]),
+        );
+        let x = [
+            u[1] * w[2] - u[2] * w[1],
+            u[2] * w[0] - u[0] * w[2],
+            u[0] * w[1] - u[1] * w[0],
+        ];
+        (x[0] * x[0] + x[1] * x[1] + x[2] * x[2]).sqrt()
+    }
+
+    #[test]
+    fn triangles_on_three_edges_of_a_cell_never_collapse_in_float32() {
+        // Marching cubes puts a triangle's corners on three distinct edges of one cell; kept
+        // inside their edges, as written in float32, they are never collinear.
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(13);
+        let edges: Vec<([f64; 3], usize)> = (0..3)
+            .flat_map(|axis| {
+                (0..4).map(move |k| {
+                    let mut o = [0.0; 3];
+                    let others: Vec<usize> = (0..3).filter(|&a| a != axis).collect();
+                    o[others[0]] = (k & 1) as f64;
+                    o[others[1]] = (k >> 1) as f64;
+                    (o, axis)
+                })
+            })
+            .collect();
+        for (origin, h) in [
+            ([0.3, -0.7, 0.1], 0.004),
+            ([637_000.0, 851_000.0, 400.0], 2.0),
+        ] {
+            for _ in 0..20_000 {
+                let mut pick = [0usize; 3];
+                while pick[0] == pick[1] || pick[1] == pick[2] || pick[0] == pick[2] {
+                    pick = pick.map(|_| rng.random_range(0..12));
+                }
+                let c = pick.map(|e| {
+                    let (o, axis) = edges[e];
+                    let ends = [
+                        origin[axis] + h * o[axis],
+                        origin[axis] + h * (o[axis] + 1.0),
+                    ];
+                    let t = [0.0, 1.0, rng.random_range(0.0..1.0)][rng.random_range(0..3)];
+                    let x = clamp_to_edge(ends[0] + t * h, ends);
+                    [0, 1, 2].map(|a| {
+                        let p = if a == axis { x } else { origin[a] + h * o[a] };
+                        p as f32 as f64
+                    })
+                });
+                // `scanflow check`'s rule: flat when `2·area ≤ 1e-12·ℓ²`, `ℓ` the longest edge.
+                let longest = (0..3)
+                    .map(|i| (0..3).map(|a| (c[i][a] - c[(i + 1) % 3][a]).powi(2)).sum())
+                    .fold(0.0, f64::max);
+                assert!(double_area(c) > 1e-12 * longest, "{c:?}");
+            }
+        }
     }
 }

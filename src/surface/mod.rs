@@ -8,7 +8,22 @@
 //! point set surfaces", 2003, §3): take the [`fit::FIT_NEIGHBOURS`] nearest input points
 //! `p_i` of vertex `v`, their mean `c` and covariance `M = Σ (p_i − c)(p_i − c)ᵀ`; the plane
 //! through `c` with normal `n`, the eigenvector of `M`'s least eigenvalue `λ₀`, is the local
-//! least-squares surface, and `v` moves by its offset `d = (v − c)·n` along `n`.
+//! least-squares surface, and `d = (v − c)·n` is `v`'s offset from it.
+//!
+//! **Along the vertex's edge.** Marching cubes puts each vertex on a grid edge, and each
+//! triangle's three corners on three distinct edges of one cell. The vertex moves along its
+//! edge (direction `e`, a grid axis), to where the edge meets the plane: by `−d / (n·e)`
+//! (the plane's offset changes by `n·e` per unit along the edge), and never closer to either
+//! end of the edge than [`fit::EDGE_MARGIN`] of its length. This keeps the triangles from
+//! collapsing: three points inside three distinct edges of a box are never collinear (were
+//! they, the middle one's supporting plane would hold the whole segment, so all three would
+//! lie on one face, whose boundary a line meets in at most two points unless it runs along a
+//! side, which holds only one edge). The same holds after rounding to float32 as written:
+//! rounding to nearest is monotone, so a vertex at least two float32 units in the last place
+//! inside its edge stays strictly inside the rounded edge ([`fit::edge_margin`] takes the
+//! larger margin). The move depends only on the vertex, its edge and the points, so a vertex
+//! on a tile boundary gets the same position from both tiles. An edge nearly parallel to the
+//! plane stops the vertex at its end, closer to the plane than it was.
 //!
 //! **Why the standard-error rule.** On noisy points the plane's offset is itself uncertain:
 //! its standard error is about `√λ₀ / k` for `k` neighbours (the residual spread over the
@@ -17,8 +32,9 @@
 //! twice the standard error hardly moves the vertex (the smooth Poisson surface is kept), a
 //! larger one is followed almost fully (the surface follows precise points as a screened
 //! solve would, Kazhdan & Hoppe, "Screened Poisson surface reconstruction", 2013). A vertex
-//! moves only where its nearest point is within two voxels, and by at most two voxels, so
-//! regions the coarse solution closed (holes) are left as solved.
+//! moves only where its nearest point is within two voxels and its plane within two voxels,
+//! and by at most one voxel (its edge), so regions the coarse solution closed (holes) are
+//! left as solved.
 //!
 //! **Colour** ([`colour`]): the inverse-distance blend of the nearest
 //! [`colour::COLOUR_NEIGHBOURS`] points. **Neighbours** ([`point_grid`]) are exact k-nearest
