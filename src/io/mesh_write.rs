@@ -102,7 +102,7 @@ fn header_parts(
         }
     }
     if with_intensity {
-        tail.push_str("property float intensity\n");
+        tail.push_str("property float scalar_intensity\n");
     }
     let index = if vertices <= i32::MAX as u64 {
         "int"

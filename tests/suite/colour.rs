@@ -165,7 +165,7 @@ fn autzen_lidar_gives_an_open_coloured_terrain() {
     assert!(v[2] > 0.8, "{got}: the terrain does not face up");
     // Intensity too, as a float property with varied values.
     let inten = py(
-        "import sys, plyfile, numpy as np\nv = plyfile.PlyData.read(sys.argv[1])['vertex']\nprint(v['intensity'].dtype, len(np.unique(v['intensity'])), float(v['intensity'].max()))",
+        "import sys, plyfile, numpy as np\nv = plyfile.PlyData.read(sys.argv[1])['vertex']\nprint(v['scalar_intensity'].dtype, len(np.unique(v['scalar_intensity'])), float(v['scalar_intensity'].max()))",
         &out,
     );
     let parts: Vec<&str> = inten.split(' ').collect();
