@@ -18,6 +18,10 @@ const TIE_NEIGHBOURS: usize = 2;
 /// so no triangle collapses ([module docs](super)).
 pub const EDGE_MARGIN: f64 = 0.01;
 
+/// A vertex that slid more than this along its edge (in voxels) is fitted once more, to the
+/// plane of the points around where it went.
+const REFIT_VOXELS: f64 = 0.1;
+
 /// The cell of the [`PointGrid`] a tile's points are bucketed in, in fine voxels (a start:
 /// the grid adapts it to the points' density).
 const POINT_GRID_CELL_VOXELS: f64 = 2.5;
@@ -105,16 +109,33 @@ impl NearPoints {
                     inexact.push(vi);
                 }
                 let (color, intensity) = blend_colour(&nb, h);
-                let pos = if fit {
+                let (mut pos, mut reach) = (*v, reach);
+                if fit {
                     let (node, axis) = geom.decode_edge(*key);
                     let a = axis as usize;
                     let mut up = node;
                     up[a] += 1;
                     let edge = [geom.node_position(node)[a], geom.node_position(up)[a]];
-                    project(*v, a, edge, &nb, h)
-                } else {
-                    *v
-                };
+                    let (p, first) = project_plane(*v, a, edge, &nb, h);
+                    pos = p;
+                    // A long slide along the edge: the plane again, from the points around
+                    // where the vertex went (exact too: its reach counts from the vertex).
+                    if let (Some((plane, kept)), true) =
+                        (first, (p[a] - v[a]).abs() > REFIT_VOXELS * h)
+                    {
+                        grid.nearest(p, k, &mut found);
+                        let nb2 = self.neighbours(&found, want);
+                        let reach2 = nb2.last().map_or(0.0, |x| x.0.sqrt());
+                        let room2 = (0..3)
+                            .map(|d| (p[d] - self.lo[d]).min(self.hi[d] - p[d]))
+                            .fold(f64::INFINITY, f64::min);
+                        if reach2 >= room2 && reach < room {
+                            inexact.push(vi);
+                        }
+                        reach = reach.max(reach2 + (p[a] - v[a]).abs());
+                        pos = refit(p, a, edge, &nb2, h, &plane, kept);
+                    }
+                }
                 VertexFit {
                     pos,
                     color,
@@ -154,49 +175,116 @@ impl NearPoints {
 /// within the edge by [`edge_margin`]. Not moved (only kept within the edge) when fewer than
 /// 3 neighbours, the nearest beyond two voxels, or the plane beyond two voxels.
 pub fn project(v: [f64; 3], axis: usize, edge: [f64; 2], nb: &[Neighbour], h: f64) -> [f64; 3] {
-    let step = edge_step(v, axis, nb, h);
-    let mut p = v;
-    p[axis] = clamp_to_edge(
-        if step.is_nan() {
-            v[axis]
-        } else {
-            v[axis] + step
-        },
-        edge,
-    );
-    p
+    project_plane(v, axis, edge, nb, h).0
 }
 
-/// How far along `axis` the vertex `v` moves toward its neighbours' plane (see [`project`]).
-fn edge_step(v: [f64; 3], axis: usize, nb: &[Neighbour], h: f64) -> f64 {
-    if nb.len() < 3 || nb[0].0 > 4.0 * h * h {
-        return 0.0;
-    }
-    let n = nb.len() as f64;
-    let mut c = [0f64; 3];
-    for (_, p, _, _) in nb {
-        for a in 0..3 {
-            c[a] += p[a] / n;
-        }
-    }
-    let mut m = nalgebra::Matrix3::<f64>::zeros();
-    for (_, p, _, _) in nb {
-        let d = nalgebra::Vector3::new(p[0] - c[0], p[1] - c[1], p[2] - c[2]);
-        m += d * d.transpose();
-    }
-    let e = m.symmetric_eigen();
-    let i = e.eigenvalues.imin();
-    let nrm = e.eigenvectors.column(i);
-    let off = (v[0] - c[0]) * nrm[0] + (v[1] - c[1]) * nrm[1] + (v[2] - c[2]) * nrm[2];
-    let se = e.eigenvalues[i].max(0.0).sqrt() / n;
+/// [`project`], and the plane with the offset from it the vertex keeps when it moved.
+fn project_plane(
+    v: [f64; 3],
+    axis: usize,
+    edge: [f64; 2],
+    nb: &[Neighbour],
+    h: f64,
+) -> ([f64; 3], Option<(Plane, f64)>) {
+    let mut p = v;
+    p[axis] = clamp_to_edge(v[axis], edge);
+    let Some(plane) = Plane::fit(nb, h) else {
+        return (p, None);
+    };
+    let off = plane.offset(v);
     if off.abs() > 2.0 * h || off == 0.0 {
-        return 0.0;
+        return (p, None);
     }
-    // The offset to remove, shrunk toward zero by how much of it the plane's error could
-    // explain; along the edge the offset changes by `nrm[axis]` a unit (an edge parallel to
-    // the plane gives an infinite step, which the edge's ends stop).
-    let step = off * (1.0 - (2.0 * se / off).powi(2)).max(0.0);
-    if step == 0.0 { 0.0 } else { -step / nrm[axis] }
+    let step = plane.shrink(off);
+    p[axis] = clamp_to_edge(v[axis] + along(step, plane.n[axis]), edge);
+    (p, Some((plane, off - step)))
+}
+
+/// The vertex `p` (moved along its edge toward `first`'s plane, keeping offset `kept` from
+/// it) moved again along the edge, to offset `kept` from the plane of its own neighbours
+/// `nb`, when that plane is found and within two voxels.
+fn refit(
+    p: [f64; 3],
+    axis: usize,
+    edge: [f64; 2],
+    nb: &[Neighbour],
+    h: f64,
+    first: &Plane,
+    kept: f64,
+) -> [f64; 3] {
+    let Some(mut plane) = Plane::fit(nb, h) else {
+        return p;
+    };
+    if (0..3).map(|a| plane.n[a] * first.n[a]).sum::<f64>() < 0.0 {
+        plane.n = plane.n.map(|x| -x);
+    }
+    let off = plane.offset(p);
+    if off.abs() > 2.0 * h {
+        return p;
+    }
+    let mut q = p;
+    q[axis] = clamp_to_edge(p[axis] + along(off - kept, plane.n[axis]), edge);
+    q
+}
+
+/// The move along an axis that changes a plane's offset by `-step`, the plane's normal having
+/// `n_axis` along it (an axis parallel to the plane gives an infinite move, which the edge's
+/// ends stop).
+fn along(step: f64, n_axis: f64) -> f64 {
+    let s = -step / n_axis;
+    if step == 0.0 || s.is_nan() { 0.0 } else { s }
+}
+
+/// The least-squares plane of a vertex's neighbours.
+#[derive(Debug, Clone, Copy)]
+struct Plane {
+    /// The neighbours' mean.
+    c: [f64; 3],
+    /// Unit normal: the eigenvector of their covariance's least eigenvalue.
+    n: [f64; 3],
+    /// Standard error of the plane's offset.
+    se: f64,
+}
+
+impl Plane {
+    /// The plane of `nb` (nearest first), or `None` when fewer than 3 or the nearest beyond
+    /// two voxels `h`.
+    fn fit(nb: &[Neighbour], h: f64) -> Option<Plane> {
+        if nb.len() < 3 || nb[0].0 > 4.0 * h * h {
+            return None;
+        }
+        let k = nb.len() as f64;
+        let mut c = [0f64; 3];
+        for (_, p, _, _) in nb {
+            for a in 0..3 {
+                c[a] += p[a] / k;
+            }
+        }
+        let mut m = nalgebra::Matrix3::<f64>::zeros();
+        for (_, p, _, _) in nb {
+            let d = nalgebra::Vector3::new(p[0] - c[0], p[1] - c[1], p[2] - c[2]);
+            m += d * d.transpose();
+        }
+        let e = m.symmetric_eigen();
+        let i = e.eigenvalues.imin();
+        let n = e.eigenvectors.column(i);
+        Some(Plane {
+            c,
+            n: [n[0], n[1], n[2]],
+            se: e.eigenvalues[i].max(0.0).sqrt() / k,
+        })
+    }
+
+    /// Signed offset of `v` from the plane.
+    fn offset(&self, v: [f64; 3]) -> f64 {
+        (0..3).map(|a| (v[a] - self.c[a]) * self.n[a]).sum()
+    }
+
+    /// The part of offset `off` to remove: shrunk toward zero by how much of it the plane's
+    /// error could explain.
+    fn shrink(&self, off: f64) -> f64 {
+        off * (1.0 - (2.0 * self.se / off).powi(2)).max(0.0)
+    }
 }
 
 /// The margin, in input units, that keeps a vertex inside the grid edge `edge` (its two end
@@ -285,6 +373,46 @@ mod tests {
         let v = project([0.001, 0.0, -0.002], 0, [-0.005, 0.005], &nb, h);
         assert!(v[0].abs() <= 0.005 - EDGE_MARGIN * h, "{v:?}");
         assert_eq!((v[1], v[2]), (0.0, -0.002));
+    }
+
+    /// The 20 nearest of `pts` to `v`, as neighbours.
+    fn nearest(pts: &[[f64; 3]], v: [f64; 3]) -> Vec<Neighbour> {
+        let mut nb: Vec<Neighbour> = pts
+            .iter()
+            .map(|p| {
+                let d2 = (0..3).map(|a| (p[a] - v[a]).powi(2)).sum();
+                (d2, *p, [0; 3], 0.0)
+            })
+            .collect();
+        nb.sort_by(|a, b| a.0.total_cmp(&b.0));
+        nb.truncate(FIT_NEIGHBOURS);
+        nb
+    }
+
+    #[test]
+    fn long_slide_is_fitted_again_where_the_vertex_went() {
+        // Precise points on a cylinder of radius 20 voxels about the y axis, top at z = 0; an
+        // x edge below the top meets it at a grazing angle, far from where the vertex starts:
+        // the plane of the points near the start misses the curve there.
+        let (h, r) = (0.01, 0.2);
+        let mut pts = Vec::new();
+        for i in -40..=40 {
+            for j in -4..=4 {
+                let t = i as f64 * 0.0025 / r;
+                pts.push([r * t.sin(), j as f64 * 0.0025, r * t.cos() - r]);
+            }
+        }
+        let z = -0.006;
+        let want = (r * r - (z + r) * (z + r)).sqrt();
+        let edge = [0.04, 0.05];
+        let v = [0.0401, 0.0, z];
+        let (p1, first) = project_plane(v, 0, edge, &nearest(&pts, v), h);
+        let (plane, kept) = first.expect("the vertex moves");
+        assert!((p1[0] - v[0]).abs() > REFIT_VOXELS * h, "{p1:?}");
+        let p2 = refit(p1, 0, edge, &nearest(&pts, p1), h, &plane, kept);
+        let (e1, e2) = ((p1[0] - want).abs(), (p2[0] - want).abs());
+        assert!(e2 < 0.25 * e1, "first {e1}, again {e2}");
+        assert_eq!((p2[1], p2[2]), (0.0, z));
     }
 
     #[test]

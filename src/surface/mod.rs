@@ -23,7 +23,12 @@
 //! inside its edge stays strictly inside the rounded edge ([`fit::edge_margin`] takes the
 //! larger margin). The move depends only on the vertex, its edge and the points, so a vertex
 //! on a tile boundary gets the same position from both tiles. An edge nearly parallel to the
-//! plane stops the vertex at its end, closer to the plane than it was.
+//! plane stops the vertex at its end, closer to the plane than it was. A vertex that slid
+//! more than a tenth of a voxel is fitted once more: the plane of the points nearest to where
+//! it went (the first plane, fitted around the start, misses a curved surface there), moved
+//! along the edge to keep the offset the first step kept (demo, against the normal-direction
+//! move it replaces: mean distance to the truth +0.9% and +0.2% instead of +3.6% and +1.8%
+//! without this second fit).
 //!
 //! **Why the standard-error rule.** On noisy points the plane's offset is itself uncertain:
 //! its standard error is about `√λ₀ / k` for `k` neighbours (the residual spread over the

@@ -43,7 +43,9 @@ fn check_json(mesh: &Path) -> serde_json::Value {
 
 #[test]
 fn fitted_mesh_has_no_degenerate_triangles_and_trimesh_calls_it_watertight() {
-    // The demo in small: a noisy bumpy sphere, reconstructed with the vertex fit.
+    // The demo in small: a noisy bumpy sphere, reconstructed with the vertex fit. Seed 7 is
+    // one where moving vertices along the plane's normal left 4 zero-area triangles, and
+    // trimesh's vertex merge then found the mesh not watertight.
     let d = tempfile::tempdir().unwrap();
     let ply = d.path().join("bumpy.ply");
     let mesh = d.path().join("mesh.ply");
@@ -54,6 +56,8 @@ fn fitted_mesh_has_no_degenerate_triangles_and_trimesh_calls_it_watertight() {
         "200000",
         "--noise",
         "0.001",
+        "--seed",
+        "7",
         "-o",
         s(&ply),
         "--progress",
