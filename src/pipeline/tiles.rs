@@ -22,7 +22,7 @@ use crate::extract::weld::Welder;
 use crate::io::mesh_write::MeshPlyWriter;
 use crate::recon::checkpoint::{read_tile, tile_path, write_tile};
 use crate::recon::{CoarseField, Plan, leaves_near, pou, tile_blend};
-use crate::surface::{NearPoints, Support, trim_mesh};
+use crate::surface::{NearPoints, Support, settle, trim_mesh};
 use crate::types::{CellKey, Detail, EdgeKey, GridGeom, TileMesh, demorton3, morton3};
 
 /// Bytes a tile node holds while its field is built: the blend's i64 accumulator (8) and the
@@ -379,8 +379,14 @@ fn fit_tile(
             fits[vi] = f;
         }
     }
-    for (p, f) in mesh.positions.iter_mut().zip(&fits) {
-        *p = f.pos;
+    if fit {
+        mesh.positions = settle(
+            &mesh.triangles,
+            &mesh.keys,
+            &fits,
+            &geom,
+            job.plan.leaf_voxels,
+        );
     }
     if job.with_color {
         mesh.colors = fits.iter().map(|f| f.color).collect();

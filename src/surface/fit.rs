@@ -47,8 +47,12 @@ pub struct NearPoints {
 /// What the input points say about one vertex.
 #[derive(Debug, Clone, Copy)]
 pub struct VertexFit {
-    /// The vertex, moved onto its neighbours' plane when fitting.
+    /// The vertex, moved along its grid edge toward its neighbours' plane when fitting.
     pub pos: [f64; 3],
+    /// The vertex moved along the plane's normal instead (the plain one-step projection):
+    /// where [`super::settle()`] finds that no triangle collapses or flips with it (`pos` when
+    /// the vertex does not move).
+    pub free_pos: [f64; 3],
     /// 8-bit RGB colour.
     pub color: [u8; 3],
     /// Intensity.
@@ -78,6 +82,7 @@ impl NearPoints {
                 .iter()
                 .map(|v| VertexFit {
                     pos: *v,
+                    free_pos: *v,
                     color: [128; 3],
                     intensity: 0.0,
                     reach: 0.0,
@@ -110,6 +115,7 @@ impl NearPoints {
                 }
                 let (color, intensity) = blend_colour(&nb, h);
                 let (mut pos, mut reach) = (*v, reach);
+                let mut free_pos = *v;
                 if fit {
                     let (node, axis) = geom.decode_edge(*key);
                     let a = axis as usize;
@@ -118,6 +124,11 @@ impl NearPoints {
                     let edge = [geom.node_position(node)[a], geom.node_position(up)[a]];
                     let (p, first) = project_plane(*v, a, edge, &nb, h);
                     pos = p;
+                    free_pos = p;
+                    if let Some((plane, kept)) = first {
+                        let step = plane.offset(*v) - kept;
+                        free_pos = [0, 1, 2].map(|d| v[d] - step * plane.n[d]);
+                    }
                     // A long slide along the edge: the plane again, from the points around
                     // where the vertex went (exact too: its reach counts from the vertex).
                     if let (Some((plane, kept)), true) =
@@ -138,6 +149,7 @@ impl NearPoints {
                 }
                 VertexFit {
                     pos,
+                    free_pos,
                     color,
                     intensity,
                     reach,
