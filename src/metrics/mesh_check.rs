@@ -22,6 +22,9 @@ pub struct MeshCheck {
     pub boundary_edges: usize,
     /// Edges used by more than two triangles.
     pub non_manifold_edges: usize,
+    /// Vertices whose triangles form more than one fan (triangles around the vertex joined
+    /// through the edges at it): e.g. two closed surfaces touching at a point.
+    pub non_manifold_vertices: usize,
     /// Edges used by two triangles in the same direction (orientation flips).
     pub inconsistent_edges: usize,
     /// Triangles with a repeated index or zero area (up to rounding).
@@ -34,6 +37,8 @@ pub struct MeshCheck {
     pub watertight: bool,
     /// No non-manifold edge.
     pub edge_manifold: bool,
+    /// No non-manifold vertex.
+    pub vertex_manifold: bool,
     /// No inconsistent edge.
     pub oriented: bool,
     /// Bounds of all vertices, in the mesh's units.
@@ -91,9 +96,7 @@ fn count_edges<K: PackedEdge>(m: &Mesh) -> (usize, usize, usize) {
     let mut keys: Vec<K> = m
         .triangles
         .par_iter()
-        .filter(|t| {
-            t.iter().all(|&v| (v as usize) < n) && t[0] != t[1] && t[1] != t[2] && t[2] != t[0]
-        })
+        .filter(|t| proper(t, n))
         .flat_map_iter(|t| {
             [
                 K::pack(t[0], t[1]),
@@ -118,6 +121,89 @@ fn count_edges<K: PackedEdge>(m: &Mesh) -> (usize, usize, usize) {
     (boundary, non_manifold, inconsistent)
 }
 
+/// Whether triangle `t` has three distinct indices, all below `n`: the triangles that take part
+/// in edge and fan counts.
+#[inline]
+fn proper(t: &[u32; 3], n: usize) -> bool {
+    t.iter().all(|&v| (v as usize) < n) && t[0] != t[1] && t[1] != t[2] && t[2] != t[0]
+}
+
+/// Vertices whose proper triangles form more than one fan. Around vertex `v`, each triangle
+/// `(v, a, b)` is an edge `a–b` of `v`'s *link*; the fans are the link's connected components
+/// (two triangles are in one fan when they share an edge at `v`). The triangles at each
+/// vertex are listed by a counting sort (`I`: a triangle index type wide enough).
+fn count_non_manifold_vertices<I>(m: &Mesh) -> usize
+where
+    I: Copy + Send + Sync + TryFrom<usize> + Into<u64>,
+{
+    let n = m.vertices.len();
+    let mut start = vec![0usize; n + 1];
+    for t in m.triangles.iter().filter(|t| proper(t, n)) {
+        for &v in t {
+            start[v as usize + 1] += 1;
+        }
+    }
+    for v in 0..n {
+        start[v + 1] += start[v];
+    }
+    let Ok(zero) = I::try_from(0) else { return 0 };
+    let mut at = vec![zero; start[n]];
+    let mut fill = start.clone();
+    for (ti, t) in m.triangles.iter().enumerate().filter(|(_, t)| proper(t, n)) {
+        let Ok(i) = I::try_from(ti) else { continue };
+        for &v in t {
+            at[fill[v as usize]] = i;
+            fill[v as usize] += 1;
+        }
+    }
+    drop(fill);
+    (0..n)
+        .into_par_iter()
+        .map_init(
+            || (Vec::new(), Vec::new()),
+            |(nodes, parent): &mut (Vec<u32>, Vec<usize>), v| {
+                let tris = &at[start[v]..start[v + 1]];
+                let link = |i: &I| {
+                    let t = m.triangles[(*i).into() as usize];
+                    let k = t.iter().position(|&x| x as usize == v).unwrap_or(0);
+                    (t[(k + 1) % 3], t[(k + 2) % 3])
+                };
+                nodes.clear();
+                nodes.extend(tris.iter().flat_map(|i| {
+                    let (a, b) = link(i);
+                    [a, b]
+                }));
+                nodes.sort_unstable();
+                nodes.dedup();
+                parent.clear();
+                parent.extend(0..nodes.len());
+                let mut fans = nodes.len();
+                for i in tris {
+                    let (a, b) = link(i);
+                    let (Ok(a), Ok(b)) = (nodes.binary_search(&a), nodes.binary_search(&b)) else {
+                        continue;
+                    };
+                    let (ra, rb) = (root(parent, a), root(parent, b));
+                    if ra != rb {
+                        parent[ra.max(rb)] = ra.min(rb);
+                        fans -= 1;
+                    }
+                }
+                usize::from(fans > 1)
+            },
+        )
+        .sum()
+}
+
+/// Union-find root of `i` in a small forest.
+fn root(parent: &mut [usize], mut i: usize) -> usize {
+    while parent[i] != i {
+        parent[i] = parent[parent[i]];
+        i = parent[i];
+    }
+    i
+}
+
 /// Union-find root of `v`, halving paths.
 #[inline]
 fn find(parent: &mut [u32], mut v: u32) -> u32 {
@@ -130,13 +216,18 @@ fn find(parent: &mut [u32], mut v: u32) -> u32 {
 }
 
 /// Check the topology of `m`; see the module docs for the conventions. Memory: about
-/// 24 bytes a triangle (edge keys) and 5 bytes a vertex.
+/// 24 bytes a triangle (edge keys, then the triangles at each vertex) and 17 bytes a vertex.
 pub fn check_mesh(m: &Mesh) -> MeshCheck {
     let n = m.vertices.len();
     let (boundary_edges, non_manifold_edges, inconsistent_edges) = if n <= 1 << 31 {
         count_edges::<u64>(m)
     } else {
         count_edges::<u128>(m)
+    };
+    let non_manifold_vertices = if m.triangles.len() <= u32::MAX as usize {
+        count_non_manifold_vertices::<u32>(m)
+    } else {
+        count_non_manifold_vertices::<u64>(m)
     };
 
     let (degenerate_triangles, invalid_triangles) = m
@@ -207,12 +298,14 @@ pub fn check_mesh(m: &Mesh) -> MeshCheck {
         components,
         boundary_edges,
         non_manifold_edges,
+        non_manifold_vertices,
         inconsistent_edges,
         degenerate_triangles,
         invalid_triangles,
         unreferenced_vertices,
         watertight: boundary_edges == 0 && non_manifold_edges == 0,
         edge_manifold: non_manifold_edges == 0,
+        vertex_manifold: non_manifold_vertices == 0,
         oriented: inconsistent_edges == 0,
         bounds,
         diagonal,
@@ -280,6 +373,44 @@ mod tests {
         let c = check_mesh(&m);
         assert_eq!((c.components, c.unreferenced_vertices), (2, 1));
         assert!(c.watertight && c.oriented);
+    }
+
+    #[test]
+    fn tetrahedra_sharing_one_vertex_make_it_non_manifold() {
+        // Two closed tetrahedra with vertex 0 in common: watertight and edge-manifold, but
+        // the triangles at vertex 0 form two fans.
+        let v = [
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [0.0, 0.0, 1.0],
+            [-1.0, 0.0, 0.0],
+            [0.0, -1.0, 0.0],
+            [0.0, 0.0, -1.0],
+        ];
+        let t = [
+            [0, 2, 1],
+            [0, 1, 3],
+            [1, 2, 3],
+            [0, 3, 2],
+            [0, 5, 4],
+            [0, 4, 6],
+            [4, 5, 6],
+            [0, 6, 5],
+        ];
+        let c = check_mesh(&mesh(&v, &t));
+        assert!(c.watertight && c.edge_manifold && c.oriented, "{c:?}");
+        assert_eq!((c.non_manifold_vertices, c.components), (1, 1));
+        assert!(!c.vertex_manifold);
+        // Closed and open single fans are manifold.
+        let c = check_mesh(&octahedron());
+        assert_eq!(c.non_manifold_vertices, 0);
+        let mut m = octahedron();
+        m.triangles.remove(5);
+        assert_eq!(check_mesh(&m).non_manifold_vertices, 0);
+        // Two triangles touching at a vertex only.
+        let c = check_mesh(&mesh(&v, &[[0, 1, 2], [0, 4, 5]]));
+        assert_eq!(c.non_manifold_vertices, 1);
     }
 
     #[test]

@@ -19,12 +19,17 @@
 //! longest edge; such triangles still count in edges. *Components* are the connected
 //! components of the graph whose nodes are triangles, two triangles being connected when they
 //! share a **vertex** (union-find over the vertices of each triangle), so two cones touching
-//! at their apex are one component. A mesh is *watertight* when it has no boundary and no
-//! non-manifold edge, *edge-manifold* when no edge is used more than twice, and *oriented* when
-//! no edge is inconsistent.
+//! at their apex are one component. A vertex is *non-manifold* when its proper triangles form
+//! more than one fan: around vertex `v` each triangle `(v, a, b)` is an edge `a–b` of `v`'s
+//! link, and the fans are the link's connected components (two cones touching at their apex:
+//! two fans; a closed or open umbrella: one). A mesh is *watertight* when it has no boundary
+//! and no non-manifold edge, *edge-manifold* when no edge is used more than twice,
+//! *vertex-manifold* when no vertex is non-manifold, and *oriented* when no edge is
+//! inconsistent.
 //!
 //! Edges are counted by sorting one packed `u64` key per directed use (3 per triangle:
-//! 24 bytes a triangle, in parallel with rayon), not by hashing.
+//! 24 bytes a triangle, in parallel with rayon), not by hashing; fans from the triangles at
+//! each vertex, listed by a counting sort (12 bytes a triangle, 16 a vertex).
 //!
 //! # Distances ([`mesh_to_truth`], [`mesh_to_reference`])
 //!

@@ -217,15 +217,16 @@ impl fmt::Display for CheckReport {
         )?;
         writeln!(
             f,
-            "  watertight: {}, edge-manifold: {}, oriented: {}",
+            "  watertight: {}, edge-manifold: {}, vertex-manifold: {}, oriented: {}",
             yes(c.watertight),
             yes(c.edge_manifold),
+            yes(c.vertex_manifold),
             yes(c.oriented)
         )?;
         writeln!(
             f,
-            "  boundary edges {}, non-manifold edges {}, inconsistent edges {}",
-            c.boundary_edges, c.non_manifold_edges, c.inconsistent_edges
+            "  boundary edges {}, non-manifold edges {}, inconsistent edges {}, non-manifold vertices {}",
+            c.boundary_edges, c.non_manifold_edges, c.inconsistent_edges, c.non_manifold_vertices
         )?;
         writeln!(
             f,

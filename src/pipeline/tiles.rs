@@ -22,7 +22,7 @@ use crate::extract::weld::Welder;
 use crate::io::mesh_write::{MeshPlyWriter, VertexFormat};
 use crate::recon::checkpoint::{read_tile, tile_path, write_tile};
 use crate::recon::{CoarseField, Plan, leaves_near, pou, tile_blend};
-use crate::surface::{NearPoints, Support, trim_mesh};
+use crate::surface::{NearPoints, Support, settle, trim_mesh};
 use crate::types::{CellKey, Detail, EdgeKey, GridGeom, TileMesh, demorton3, morton3};
 
 /// Bytes a tile node holds while its field is built: the blend's i64 accumulator (8) and the
@@ -377,7 +377,13 @@ fn fit_tile(
     cp: &NearPoints,
 ) -> Result<()> {
     let (h, fit) = (job.plan.spacing, job.params.fit);
-    let (mut fits, inexact) = cp.fit_vertices(&mesh.positions, h, fit);
+    // The tile meshes' frame: offsets from the cube's corner (see `to_local`).
+    let geom = GridGeom {
+        origin: [0.0; 3],
+        h,
+        n: job.plan.fine_cells,
+    };
+    let (mut fits, inexact) = cp.fit_vertices(&mesh.positions, &mesh.keys, &geom, fit);
     // Vertices whose neighbours may lie beyond the gathered box: their true neighbours lie
     // within their current farthest one, so one wider gather around them is exact (rare:
     // vertices far from every point).
@@ -386,6 +392,7 @@ fn fit_tile(
         let mut lo = [f64::INFINITY; 3];
         let mut hi = [f64::NEG_INFINITY; 3];
         let vs: Vec<[f64; 3]> = inexact.iter().map(|&i| mesh.positions[i]).collect();
+        let ks: Vec<EdgeKey> = inexact.iter().map(|&i| mesh.keys[i]).collect();
         for v in &vs {
             for a in 0..3 {
                 lo[a] = lo[a].min(v[a]);
@@ -401,13 +408,19 @@ fn fit_tile(
             lock(src)?.near_points(lo, hi, reach * (1.0 + 1e-9) + h * 1e-6)?,
             o,
         );
-        let (fixed, _) = wide.fit_vertices(&vs, h, fit);
+        let (fixed, _) = wide.fit_vertices(&vs, &ks, &geom, fit);
         for (&vi, f) in inexact.iter().zip(fixed) {
             fits[vi] = f;
         }
     }
-    for (p, f) in mesh.positions.iter_mut().zip(&fits) {
-        *p = f.pos;
+    if fit {
+        mesh.positions = settle(
+            &mesh.triangles,
+            &mesh.keys,
+            &fits,
+            &geom,
+            job.plan.leaf_voxels,
+        );
     }
     if job.with_color {
         mesh.colors = fits.iter().map(|f| f.color).collect();

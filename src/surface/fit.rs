@@ -3,6 +3,7 @@
 
 use super::colour::{COLOUR_NEIGHBOURS, blend_colour};
 use super::point_grid::PointGrid;
+use crate::types::{EdgeKey, GridGeom};
 
 /// Input points whose plane a vertex is moved onto (`fit`).
 pub const FIT_NEIGHBOURS: usize = 20;
@@ -10,6 +11,16 @@ pub const FIT_NEIGHBOURS: usize = 20;
 /// Extra neighbours gathered beyond those used, so that ties at the last place are seen and
 /// broken alike.
 const TIE_NEIGHBOURS: usize = 2;
+
+/// How close to either end of its grid edge a fitted vertex may come, in edge lengths (at
+/// least; more where float32 output could not tell the vertex from the end, see
+/// [`edge_margin`]). Keeps every triangle's corners inside three distinct edges of its cell,
+/// so no triangle collapses ([module docs](super)).
+pub const EDGE_MARGIN: f64 = 0.01;
+
+/// A vertex that slid more than this along its edge (in voxels) is fitted once more, to the
+/// plane of the points around where it went.
+const REFIT_VOXELS: f64 = 0.1;
 
 /// The cell of the [`PointGrid`] a tile's points are bucketed in, in fine voxels (a start:
 /// the grid adapts it to the points' density).
@@ -36,8 +47,12 @@ pub struct NearPoints {
 /// What the input points say about one vertex.
 #[derive(Debug, Clone, Copy)]
 pub struct VertexFit {
-    /// The vertex, moved onto its neighbours' plane when fitting.
+    /// The vertex, moved along its grid edge toward its neighbours' plane when fitting.
     pub pos: [f64; 3],
+    /// The vertex moved along the plane's normal instead (the plain one-step projection):
+    /// where [`super::settle()`] finds that no triangle collapses or flips with it (`pos` when
+    /// the vertex does not move).
+    pub free_pos: [f64; 3],
     /// 8-bit RGB colour.
     pub color: [u8; 3],
     /// Intensity.
@@ -47,22 +62,27 @@ pub struct VertexFit {
 }
 
 impl NearPoints {
-    /// For each vertex: its position moved onto the plane of its [`FIT_NEIGHBOURS`] nearest
-    /// input points (when `fit`, [`project`]), and its colour and intensity
-    /// ([`blend_colour`]). Neighbours are ordered by distance, then position, then colour, so
-    /// the answer depends only on the point set. Also returns the vertices whose answer may
-    /// not be exact: their farthest neighbour lies beyond the gathered box's faces.
+    /// For each vertex (at `vertices[i]` on grid edge `keys[i]` of `geom`): its position moved
+    /// along its edge toward the plane of its [`FIT_NEIGHBOURS`] nearest input points (when
+    /// `fit`, [`project`]), and its colour and intensity ([`blend_colour`]). Neighbours are
+    /// ordered by distance, then position, then colour, so the answer depends only on the
+    /// point set and the vertex. Also returns the vertices whose answer may not be exact:
+    /// their farthest neighbour lies beyond the gathered box's faces.
     pub fn fit_vertices(
         &self,
         vertices: &[[f64; 3]],
-        h: f64,
+        keys: &[EdgeKey],
+        geom: &GridGeom,
         fit: bool,
     ) -> (Vec<VertexFit>, Vec<usize>) {
+        debug_assert_eq!(vertices.len(), keys.len());
+        let h = geom.h;
         if self.pos.is_empty() {
             let out = vertices
                 .iter()
                 .map(|v| VertexFit {
                     pos: *v,
+                    free_pos: *v,
                     color: [128; 3],
                     intensity: 0.0,
                     reach: 0.0,
@@ -81,8 +101,9 @@ impl NearPoints {
         let mut found = Vec::with_capacity(k);
         let out = vertices
             .iter()
+            .zip(keys)
             .enumerate()
-            .map(|(vi, v)| {
+            .map(|(vi, (v, key))| {
                 grid.nearest(*v, k, &mut found);
                 let nb = self.neighbours(&found, want);
                 let reach = nb.last().map_or(0.0, |x| x.0.sqrt());
@@ -93,9 +114,42 @@ impl NearPoints {
                     inexact.push(vi);
                 }
                 let (color, intensity) = blend_colour(&nb, h);
-                let pos = if fit { project(*v, &nb, h) } else { *v };
+                let (mut pos, mut reach) = (*v, reach);
+                let mut free_pos = *v;
+                if fit {
+                    let (node, axis) = geom.decode_edge(*key);
+                    let a = axis as usize;
+                    let mut up = node;
+                    up[a] += 1;
+                    let edge = [geom.node_position(node)[a], geom.node_position(up)[a]];
+                    let (p, first) = project_plane(*v, a, edge, &nb, h);
+                    pos = p;
+                    free_pos = p;
+                    if let Some((plane, kept)) = first {
+                        let step = plane.offset(*v) - kept;
+                        free_pos = [0, 1, 2].map(|d| v[d] - step * plane.n[d]);
+                    }
+                    // A long slide along the edge: the plane again, from the points around
+                    // where the vertex went (exact too: its reach counts from the vertex).
+                    if let (Some((plane, kept)), true) =
+                        (first, (p[a] - v[a]).abs() > REFIT_VOXELS * h)
+                    {
+                        grid.nearest(p, k, &mut found);
+                        let nb2 = self.neighbours(&found, want);
+                        let reach2 = nb2.last().map_or(0.0, |x| x.0.sqrt());
+                        let room2 = (0..3)
+                            .map(|d| (p[d] - self.lo[d]).min(self.hi[d] - p[d]))
+                            .fold(f64::INFINITY, f64::min);
+                        if reach2 >= room2 && reach < room {
+                            inexact.push(vi);
+                        }
+                        reach = reach.max(reach2 + (p[a] - v[a]).abs());
+                        pos = refit(p, a, edge, &nb2, h, &plane, kept);
+                    }
+                }
                 VertexFit {
                     pos,
+                    free_pos,
                     color,
                     intensity,
                     reach,
@@ -126,74 +180,347 @@ impl NearPoints {
     }
 }
 
-/// `v` moved onto the plane of its neighbours `nb` (nearest first; fine spacing `h`): the
-/// one-step MLS projection of the [module docs](super), left alone when fewer than 3
-/// neighbours, the nearest beyond two voxels, or the plane beyond two voxels, and shrunk by
-/// what twice the standard error of the plane's offset explains.
-pub fn project(v: [f64; 3], nb: &[Neighbour], h: f64) -> [f64; 3] {
-    if nb.len() < 3 || nb[0].0 > 4.0 * h * h {
-        return v;
-    }
-    let n = nb.len() as f64;
-    let mut c = [0f64; 3];
-    for (_, p, _, _) in nb {
-        for a in 0..3 {
-            c[a] += p[a] / n;
-        }
-    }
-    let mut m = nalgebra::Matrix3::<f64>::zeros();
-    for (_, p, _, _) in nb {
-        let d = nalgebra::Vector3::new(p[0] - c[0], p[1] - c[1], p[2] - c[2]);
-        m += d * d.transpose();
-    }
-    let e = m.symmetric_eigen();
-    let i = e.eigenvalues.imin();
-    let nrm = e.eigenvectors.column(i);
-    let off = (v[0] - c[0]) * nrm[0] + (v[1] - c[1]) * nrm[1] + (v[2] - c[2]) * nrm[2];
-    let se = e.eigenvalues[i].max(0.0).sqrt() / n;
-    if off.abs() > 2.0 * h {
-        return v;
-    }
-    // Shrunk toward zero by how much of it the plane's error could explain.
-    let step = if off == 0.0 {
-        0.0
-    } else {
-        off * (1.0 - (2.0 * se / off).powi(2)).max(0.0)
+/// `v`, a vertex on the grid edge along `axis` from coordinate `edge[0]` to `edge[1]`, moved
+/// along that edge toward the plane of its neighbours `nb` (nearest first; fine spacing `h`):
+/// the one-step MLS projection of the [module docs](super), to where the edge meets the
+/// plane, shrunk by what twice the standard error of the plane's offset explains, and kept
+/// within the edge by [`edge_margin`]. Not moved (only kept within the edge) when fewer than
+/// 3 neighbours, the nearest beyond two voxels, or the plane beyond two voxels.
+pub fn project(v: [f64; 3], axis: usize, edge: [f64; 2], nb: &[Neighbour], h: f64) -> [f64; 3] {
+    project_plane(v, axis, edge, nb, h).0
+}
+
+/// [`project`], and the plane with the offset from it the vertex keeps when it moved.
+fn project_plane(
+    v: [f64; 3],
+    axis: usize,
+    edge: [f64; 2],
+    nb: &[Neighbour],
+    h: f64,
+) -> ([f64; 3], Option<(Plane, f64)>) {
+    let mut p = v;
+    p[axis] = clamp_to_edge(v[axis], edge);
+    let Some(plane) = Plane::fit(nb, h) else {
+        return (p, None);
     };
-    [0, 1, 2].map(|a| v[a] - step * nrm[a])
+    let off = plane.offset(v);
+    if off.abs() > 2.0 * h || off == 0.0 {
+        return (p, None);
+    }
+    let step = plane.shrink(off);
+    p[axis] = clamp_to_edge(v[axis] + along(step, plane.n[axis]), edge);
+    (p, Some((plane, off - step)))
+}
+
+/// The vertex `p` (moved along its edge toward `first`'s plane, keeping offset `kept` from
+/// it) moved again along the edge, to offset `kept` from the plane of its own neighbours
+/// `nb`, when that plane is found and within two voxels.
+fn refit(
+    p: [f64; 3],
+    axis: usize,
+    edge: [f64; 2],
+    nb: &[Neighbour],
+    h: f64,
+    first: &Plane,
+    kept: f64,
+) -> [f64; 3] {
+    let Some(mut plane) = Plane::fit(nb, h) else {
+        return p;
+    };
+    if (0..3).map(|a| plane.n[a] * first.n[a]).sum::<f64>() < 0.0 {
+        plane.n = plane.n.map(|x| -x);
+    }
+    let off = plane.offset(p);
+    if off.abs() > 2.0 * h {
+        return p;
+    }
+    let mut q = p;
+    q[axis] = clamp_to_edge(p[axis] + along(off - kept, plane.n[axis]), edge);
+    q
+}
+
+/// The move along an axis that changes a plane's offset by `-step`, the plane's normal having
+/// `n_axis` along it (an axis parallel to the plane gives an infinite move, which the edge's
+/// ends stop).
+fn along(step: f64, n_axis: f64) -> f64 {
+    let s = -step / n_axis;
+    if step == 0.0 || s.is_nan() { 0.0 } else { s }
+}
+
+/// The least-squares plane of a vertex's neighbours.
+#[derive(Debug, Clone, Copy)]
+struct Plane {
+    /// The neighbours' mean.
+    c: [f64; 3],
+    /// Unit normal: the eigenvector of their covariance's least eigenvalue.
+    n: [f64; 3],
+    /// Standard error of the plane's offset.
+    se: f64,
+}
+
+impl Plane {
+    /// The plane of `nb` (nearest first), or `None` when fewer than 3 or the nearest beyond
+    /// two voxels `h`.
+    fn fit(nb: &[Neighbour], h: f64) -> Option<Plane> {
+        if nb.len() < 3 || nb[0].0 > 4.0 * h * h {
+            return None;
+        }
+        let k = nb.len() as f64;
+        let mut c = [0f64; 3];
+        for (_, p, _, _) in nb {
+            for a in 0..3 {
+                c[a] += p[a] / k;
+            }
+        }
+        let mut m = nalgebra::Matrix3::<f64>::zeros();
+        for (_, p, _, _) in nb {
+            let d = nalgebra::Vector3::new(p[0] - c[0], p[1] - c[1], p[2] - c[2]);
+            m += d * d.transpose();
+        }
+        let e = m.symmetric_eigen();
+        let i = e.eigenvalues.imin();
+        let n = e.eigenvectors.column(i);
+        Some(Plane {
+            c,
+            n: [n[0], n[1], n[2]],
+            se: e.eigenvalues[i].max(0.0).sqrt() / k,
+        })
+    }
+
+    /// Signed offset of `v` from the plane.
+    fn offset(&self, v: [f64; 3]) -> f64 {
+        (0..3).map(|a| (v[a] - self.c[a]) * self.n[a]).sum()
+    }
+
+    /// The part of offset `off` to remove: shrunk toward zero by how much of it the plane's
+    /// error could explain.
+    fn shrink(&self, off: f64) -> f64 {
+        off * (1.0 - (2.0 * self.se / off).powi(2)).max(0.0)
+    }
+}
+
+/// The margin, in input units, that keeps a vertex inside the grid edge `edge` (its two end
+/// coordinates along the edge): [`EDGE_MARGIN`] of the edge, or two float32 units in the
+/// last place of the larger end if more, so that the vertex written as float32 is still
+/// strictly inside the edge written as float32 (rounding to nearest is monotone).
+pub fn edge_margin(edge: [f64; 2]) -> f64 {
+    let big = edge[0].abs().max(edge[1].abs()) as f32;
+    let ulp = if big.is_finite() {
+        (f32::from_bits(big.to_bits() + 1) - big) as f64
+    } else {
+        0.0
+    };
+    (EDGE_MARGIN * (edge[1] - edge[0])).max(2.0 * ulp)
+}
+
+/// `x` clamped to the grid edge `edge` less [`edge_margin`] at both ends (the edge's middle
+/// when the margins meet).
+fn clamp_to_edge(x: f64, edge: [f64; 2]) -> f64 {
+    let m = edge_margin(edge);
+    let (lo, hi) = (edge[0] + m, edge[1] - m);
+    if lo >= hi {
+        0.5 * (edge[0] + edge[1])
+    } else {
+        x.clamp(lo, hi)
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use rand::{Rng, SeedableRng};
+
+    /// Precise points on the plane `z = slope·x`, about the origin.
+    fn plane_points(slope: f64) -> Vec<Neighbour> {
+        let mut nb: Vec<Neighbour> = Vec::new();
+        for i in 0..5 {
+            for j in 0..4 {
+                let (x, y) = (i as f64 * 0.004 - 0.008, j as f64 * 0.004 - 0.006);
+                let p = [x, y, slope * x];
+                nb.push((x * x + y * y + p[2] * p[2], p, [0; 3], 0.0));
+            }
+        }
+        nb.sort_by(|a, b| a.0.total_cmp(&b.0));
+        nb
+    }
 
     #[test]
     fn projection_follows_precise_points_and_ignores_noise() {
         let h = 0.01;
-        // Precise points on z = 0: a vertex 0.3 voxel above moves onto the plane.
-        let mut nb: Vec<Neighbour> = Vec::new();
-        for i in 0..5 {
-            for j in 0..4 {
-                let p = [i as f64 * 0.004 - 0.008, j as f64 * 0.004 - 0.006, 0.0];
-                nb.push((p[0] * p[0] + p[1] * p[1], p, [0; 3], 0.0));
-            }
-        }
-        nb.sort_by(|a, b| a.0.total_cmp(&b.0));
-        let v = project([0.0, 0.0, 0.003], &nb, h);
+        let edge = [-0.005, 0.005];
+        // Precise points on z = 0: a vertex 0.3 voxel above, on a z edge, moves onto the plane.
+        let nb = plane_points(0.0);
+        let v = project([0.0, 0.0, 0.003], 2, edge, &nb, h);
         assert!(v[2].abs() < 1e-9, "{v:?}");
         // Too far from every point (more than two voxels): left alone.
         let far: Vec<_> = nb.iter().map(|x| (x.0 + 1.0, x.1, x.2, x.3)).collect();
-        assert_eq!(project([0.0, 0.0, 0.003], &far, h), [0.0, 0.0, 0.003]);
-        // Noisy points: an offset within the plane's error is not followed.
+        assert_eq!(
+            project([0.0, 0.0, 0.003], 2, edge, &far, h),
+            [0.0, 0.0, 0.003]
+        );
+        // Noisy points (a checkerboard of ±0.4 voxel about z = 0): an offset within the
+        // plane's error is not followed.
         let noisy: Vec<_> = nb
             .iter()
-            .enumerate()
-            .map(|(i, x)| {
-                let z = if i % 2 == 0 { 0.004 } else { -0.004 };
+            .map(|x| {
+                let cell = ((x.1[0] / 0.004).round() + (x.1[1] / 0.004).round()) as i64;
+                let z = if cell % 2 == 0 { 0.004 } else { -0.004 };
                 (x.0, [x.1[0], x.1[1], z], x.2, x.3)
             })
             .collect();
-        let v = project([0.0, 0.0, 0.0015], &noisy, h);
+        let v = project([0.0, 0.0, 0.0015], 2, edge, &noisy, h);
         assert!(v[2] > 0.0015 * 0.5, "{v:?}");
+    }
+
+    #[test]
+    fn fitted_vertex_moves_along_its_edge_to_the_plane() {
+        let h = 0.01;
+        // Plane z = x/2; the x edge at y = 0, z = 0.001 meets it at x = 0.002.
+        let nb = plane_points(0.5);
+        let v = project([-0.003, 0.0, 0.001], 0, [-0.005, 0.005], &nb, h);
+        assert!((v[0] - 0.002).abs() < 1e-9, "{v:?}");
+        assert_eq!((v[1], v[2]), (0.0, 0.001));
+        // A plane parallel to the edge: the vertex stops short of the edge's end.
+        let nb = plane_points(0.0);
+        let v = project([0.001, 0.0, -0.002], 0, [-0.005, 0.005], &nb, h);
+        assert!(v[0].abs() <= 0.005 - EDGE_MARGIN * h, "{v:?}");
+        assert_eq!((v[1], v[2]), (0.0, -0.002));
+    }
+
+    /// The 20 nearest of `pts` to `v`, as neighbours.
+    fn nearest(pts: &[[f64; 3]], v: [f64; 3]) -> Vec<Neighbour> {
+        let mut nb: Vec<Neighbour> = pts
+            .iter()
+            .map(|p| {
+                let d2 = (0..3).map(|a| (p[a] - v[a]).powi(2)).sum();
+                (d2, *p, [0; 3], 0.0)
+            })
+            .collect();
+        nb.sort_by(|a, b| a.0.total_cmp(&b.0));
+        nb.truncate(FIT_NEIGHBOURS);
+        nb
+    }
+
+    #[test]
+    fn long_slide_is_fitted_again_where_the_vertex_went() {
+        // Precise points on a cylinder of radius 20 voxels about the y axis, top at z = 0; an
+        // x edge below the top meets it at a grazing angle, far from where the vertex starts:
+        // the plane of the points near the start misses the curve there.
+        let (h, r) = (0.01, 0.2);
+        let mut pts = Vec::new();
+        for i in -40..=40 {
+            for j in -4..=4 {
+                let t = i as f64 * 0.0025 / r;
+                pts.push([r * t.sin(), j as f64 * 0.0025, r * t.cos() - r]);
+            }
+        }
+        let z = -0.006;
+        let want = (r * r - (z + r) * (z + r)).sqrt();
+        let edge = [0.04, 0.05];
+        let v = [0.0401, 0.0, z];
+        let (p1, first) = project_plane(v, 0, edge, &nearest(&pts, v), h);
+        let (plane, kept) = first.expect("the vertex moves");
+        assert!((p1[0] - v[0]).abs() > REFIT_VOXELS * h, "{p1:?}");
+        let p2 = refit(p1, 0, edge, &nearest(&pts, p1), h, &plane, kept);
+        let (e1, e2) = ((p1[0] - want).abs(), (p2[0] - want).abs());
+        assert!(e2 < 0.25 * e1, "first {e1}, again {e2}");
+        assert_eq!((p2[1], p2[2]), (0.0, z));
+    }
+
+    #[test]
+    fn fitted_vertex_never_leaves_its_edge() {
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(15);
+        let h = 0.01;
+        for _ in 0..2000 {
+            let slope = rng.random_range(-20.0..20.0);
+            let nb = plane_points(slope);
+            let axis = rng.random_range(0..3usize);
+            let lo = rng.random_range(-0.02..0.01);
+            let edge = [lo, lo + h];
+            let mut v = [0.0; 3].map(|_: f64| rng.random_range(-0.01..0.01));
+            // On the edge, ends included (marching cubes may put a vertex on a node).
+            v[axis] = lo + h * rng.random_range(0.0..=1.0);
+            let p = project(v, axis, edge, &nb, h);
+            let m = EDGE_MARGIN * h;
+            assert!(p[axis] >= lo + m && p[axis] <= lo + h - m, "{v:?} -> {p:?}");
+            for a in (0..3).filter(|&a| a != axis) {
+                assert_eq!(p[a], v[a]);
+            }
+        }
+    }
+
+    #[test]
+    fn edge_margin_covers_float32_rounding_far_from_the_origin() {
+        // Feet near 6e5: float32 steps are 1/16, more than 1% of a 2-foot edge.
+        let edge = [600_000.0, 600_002.0];
+        let m = edge_margin(edge);
+        assert!(m >= 2.0 * 0.0625, "{m}");
+        let (a, b) = (clamp_to_edge(-1e300, edge), clamp_to_edge(1e300, edge));
+        assert!((edge[0] as f32) < a as f32 && (b as f32) < edge[1] as f32);
+        // Near the origin the margin is EDGE_MARGIN of the edge.
+        assert_eq!(edge_margin([0.0, 0.01]), EDGE_MARGIN * 0.01);
+        // An edge shorter than float32 can resolve: its middle.
+        assert_eq!(clamp_to_edge(7.0, [1e7, 1e7 + 0.1]), 1e7 + 0.05);
+    }
+
+    /// Twice the area of the triangle `c` in f64.
+    fn double_area(c: [[f64; 3]; 3]) -> f64 {
+        let (u, w) = (
+            [0, 1, 2].map(|a| c[1][a] - c[0][a]),
+            [0, 1, 2].map(|a| c[2][a] - c[0][a]),
+        );
+        let x = [
+            u[1] * w[2] - u[2] * w[1],
+            u[2] * w[0] - u[0] * w[2],
+            u[0] * w[1] - u[1] * w[0],
+        ];
+        (x[0] * x[0] + x[1] * x[1] + x[2] * x[2]).sqrt()
+    }
+
+    #[test]
+    fn triangles_on_three_edges_of_a_cell_never_collapse_in_float32() {
+        // Marching cubes puts a triangle's corners on three distinct edges of one cell; kept
+        // inside their edges, as written in float32, they are never collinear.
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(13);
+        let edges: Vec<([f64; 3], usize)> = (0..3)
+            .flat_map(|axis| {
+                (0..4).map(move |k| {
+                    let mut o = [0.0; 3];
+                    let others: Vec<usize> = (0..3).filter(|&a| a != axis).collect();
+                    o[others[0]] = (k & 1) as f64;
+                    o[others[1]] = (k >> 1) as f64;
+                    (o, axis)
+                })
+            })
+            .collect();
+        for (origin, h) in [
+            ([0.3, -0.7, 0.1], 0.004),
+            ([637_000.0, 851_000.0, 400.0], 2.0),
+        ] {
+            for _ in 0..20_000 {
+                let mut pick = [0usize; 3];
+                while pick[0] == pick[1] || pick[1] == pick[2] || pick[0] == pick[2] {
+                    pick = pick.map(|_| rng.random_range(0..12));
+                }
+                let c = pick.map(|e| {
+                    let (o, axis) = edges[e];
+                    let ends = [
+                        origin[axis] + h * o[axis],
+                        origin[axis] + h * (o[axis] + 1.0),
+                    ];
+                    let t = [0.0, 1.0, rng.random_range(0.0..1.0)][rng.random_range(0..3)];
+                    let x = clamp_to_edge(ends[0] + t * h, ends);
+                    [0, 1, 2].map(|a| {
+                        let p = if a == axis { x } else { origin[a] + h * o[a] };
+                        p as f32 as f64
+                    })
+                });
+                // `scanflow check`'s rule: flat when `2·area ≤ 1e-12·ℓ²`, `ℓ` the longest edge.
+                let longest = (0..3)
+                    .map(|i| (0..3).map(|a| (c[i][a] - c[(i + 1) % 3][a]).powi(2)).sum())
+                    .fold(0.0, f64::max);
+                assert!(double_area(c) > 1e-12 * longest, "{c:?}");
+            }
+        }
     }
 }

@@ -8,7 +8,35 @@
 //! point set surfaces", 2003, §3): take the [`fit::FIT_NEIGHBOURS`] nearest input points
 //! `p_i` of vertex `v`, their mean `c` and covariance `M = Σ (p_i − c)(p_i − c)ᵀ`; the plane
 //! through `c` with normal `n`, the eigenvector of `M`'s least eigenvalue `λ₀`, is the local
-//! least-squares surface, and `v` moves by its offset `d = (v − c)·n` along `n`.
+//! least-squares surface, and `d = (v − c)·n` is `v`'s offset from it.
+//!
+//! **Two fits, and which one a vertex takes** ([`fit`], [`settle()`]). Marching cubes puts each
+//! vertex on a grid edge, and each triangle's three corners on three distinct edges of one
+//! cell. The *free fit* moves `v` by the offset along `n`, the plain projection. The *edge
+//! fit* moves `v` along its edge (direction `e`, a grid axis) to where the edge meets the
+//! plane: by `−d / (n·e)` (the plane's offset changes by `n·e` per unit along the edge), never
+//! closer to either end of the edge than [`fit::EDGE_MARGIN`] of its length. Edge fits never
+//! collapse a triangle: three points inside three distinct edges of a box are never collinear
+//! (were they, the middle one's supporting plane would hold the whole segment, so all three
+//! would lie on one face, whose boundary a line meets in at most two points unless it runs
+//! along a side, which holds only one edge). The same holds after rounding to float32 as
+//! written: rounding to nearest is monotone, so a vertex at least two float32 units in the
+//! last place inside its edge stays strictly inside the rounded edge ([`fit::edge_margin`]
+//! takes the larger margin). An edge nearly parallel to the plane stops the vertex at its
+//! end, closer to the plane than it was; a vertex that slid more than a tenth of a voxel is
+//! fitted once more, to the plane of the points nearest to where it went (the first plane,
+//! fitted around the start, misses a curved surface there), keeping the offset the first
+//! step kept.
+//!
+//! A vertex then takes its free fit where that is safe, else its edge fit ([`settle()`]): when
+//! its edge lies inside a block of leaf-sized cells (so its four cells, and all its
+//! triangles, lie in one block, inside one tile whatever the tile size) and every triangle at
+//! it, with it free and each other corner at either of its two fits, keeps a sound shape and
+//! the orientation of the all-edge-fit triangle, in `f64` and rounded to `f32`. Every
+//! triangle is then sound: with a free corner by that corner's check, without one by the
+//! edge fit's guarantee. Both fits and the choice depend only on the vertex, its block's
+//! triangles and the points, so a vertex on a tile boundary gets the same position from both
+//! tiles, for any thread count and tile size.
 //!
 //! **Why the standard-error rule.** On noisy points the plane's offset is itself uncertain:
 //! its standard error is about `√λ₀ / k` for `k` neighbours (the residual spread over the
@@ -17,8 +45,8 @@
 //! twice the standard error hardly moves the vertex (the smooth Poisson surface is kept), a
 //! larger one is followed almost fully (the surface follows precise points as a screened
 //! solve would, Kazhdan & Hoppe, "Screened Poisson surface reconstruction", 2013). A vertex
-//! moves only where its nearest point is within two voxels, and by at most two voxels, so
-//! regions the coarse solution closed (holes) are left as solved.
+//! moves only where its nearest point is within two voxels and its plane within two voxels,
+//! so regions the coarse solution closed (holes) are left as solved.
 //!
 //! **Colour** ([`colour`]): the inverse-distance blend of the nearest
 //! [`colour::COLOUR_NEIGHBOURS`] points. **Neighbours** ([`point_grid`]) are exact k-nearest
@@ -29,7 +57,9 @@
 pub mod colour;
 pub mod fit;
 pub mod point_grid;
+pub mod settle;
 pub mod trim;
 
 pub use fit::{FIT_NEIGHBOURS, NearPoints, VertexFit};
+pub use settle::settle;
 pub use trim::{Support, trim_mesh};

@@ -1,4 +1,5 @@
 mod bad_input;
+mod clean_mesh;
 mod cli;
 mod colour;
 mod common;
