@@ -514,3 +514,34 @@ fn gpu_and_cpu_write_identical_files() {
         );
     }
 }
+
+#[test]
+fn same_mesh_for_any_thread_count_under_a_tight_budget() {
+    // Under a tight --mem the ingest chunks shrink with the thread count; the cube (and so
+    // the mesh) must not follow them (8 threads once gave another cube origin here).
+    let d = tempfile::tempdir().unwrap();
+    let ply = d.path().join("b.ply");
+    ok(&[
+        "synth",
+        "bumpy",
+        "--points",
+        "400000",
+        "--seed",
+        "5",
+        "-o",
+        s(&ply),
+        "--progress",
+        "none",
+    ]);
+    let mut meshes = Vec::new();
+    for t in ["1", "8"] {
+        let out = d.path().join(format!("m{t}.ply"));
+        recon(
+            &ply,
+            &out,
+            &["--depth", "7", "--threads", t, "--mem", "48M"],
+        );
+        meshes.push(std::fs::read(&out).unwrap());
+    }
+    assert!(meshes[0] == meshes[1], "the mesh depends on --threads");
+}
