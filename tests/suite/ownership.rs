@@ -259,6 +259,26 @@ fn failed_runs_remove_their_work_dir_and_name_the_input() {
 }
 
 #[test]
+fn failed_run_that_keeps_its_work_dir_says_where_and_resumes() {
+    let d = tempfile::tempdir().unwrap();
+    let input = d.path().join("b.ply");
+    synth(&input, 20_000, 1);
+    let out = d.path().join("m.ply");
+    let work = d.path().join("m.ply.work");
+    // Ingest fits in 16M; the leaf solves of depth 9 do not: the store is worth keeping.
+    let e = usage(&recon_args(&input, &out, &["--depth", "9", "--mem", "16M"]));
+    assert!(e.contains("raise --mem"), "{e}");
+    assert!(
+        e.contains(&format!("the work directory {} is kept", work.display()))
+            && e.contains("--resume"),
+        "{e}"
+    );
+    assert!(work.join("store").is_dir() && !out.exists());
+    ok(&recon_args(&input, &out, &["--depth", "9", "--resume"]));
+    assert!(out.is_file() && !work.exists());
+}
+
+#[test]
 fn stale_temp_files_of_the_output_are_removed_by_the_next_run() {
     let d = tempfile::tempdir().unwrap();
     let input = d.path().join("b.ply");
