@@ -71,7 +71,7 @@ pub struct VertexFormat {
 impl VertexFormat {
     /// The largest float32 spacing, relative to the cube's edge, that keeps the input's
     /// resolution (see the [module docs](self)).
-    pub const FLOAT_SPACING: f64 = 1.0 / (1u64 << 20) as f64;
+    pub const FLOAT_SPACING: f64 = crate::types::FLOAT32_SPACING;
 
     /// The format for vertices inside the cube of lower corner `origin` and edge `size`:
     /// [`VertexFormat::double`] where float32's spacing at the cube's largest coordinate

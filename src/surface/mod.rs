@@ -32,7 +32,10 @@
 //! its edge lies inside a block of leaf-sized cells (so its four cells, and all its
 //! triangles, lie in one block, inside one tile whatever the tile size) and every triangle at
 //! it, with it free and each other corner at either of its two fits, keeps a sound shape and
-//! the orientation of the all-edge-fit triangle, in `f64` and rounded to `f32`. Every
+//! the orientation of the all-edge-fit triangle, with a doubled area beyond what rounding
+//! the written coordinates could undo (each moves by at most half of
+//! [`FLOAT32_SPACING`](crate::types::FLOAT32_SPACING) of the cube's edge; a bound that
+//! depends only on the cube's size, so translated inputs choose alike). Every
 //! triangle is then sound: with a free corner by that corner's check, without one by the
 //! edge fit's guarantee. Both fits and the choice depend only on the vertex, its block's
 //! triangles and the points, so a vertex on a tile boundary gets the same position from both

@@ -3,11 +3,17 @@
 //! ([module docs](super)).
 
 use super::fit::VertexFit;
-use crate::types::{EdgeKey, GridGeom};
+use crate::types::{EdgeKey, FLOAT32_SPACING, GridGeom};
 
-/// Least `2·area / ℓ²` (`ℓ` the longest edge) a triangle with a free vertex must keep, in
-/// `f64` and rounded to `f32` as written: far above `scanflow check`'s `1e-12`.
+/// Least `2·area / ℓ²` (`ℓ` the longest edge) a triangle with a free vertex must keep: far
+/// above `scanflow check`'s `1e-12`.
 pub const MIN_SHAPE: f64 = 1e-6;
+
+/// How many times the most that rounding the written coordinates can change a triangle's
+/// doubled area a triangle with a free vertex must keep. Moving each corner by at most `δ`
+/// per coordinate changes `(b − a) × (c − a)` by at most `4√3·δ·ℓ + 12δ²` (`ℓ` the longest
+/// edge); twice that is kept, so neither a zero area nor a flip can appear in the file.
+const ROUNDING_GUARD: f64 = 2.0;
 
 /// The final position of each vertex of a tile mesh (`triangles` over `keys` and `fits`):
 /// the free fit where the vertex may take it, else the edge fit. A vertex may when its edge
@@ -26,6 +32,10 @@ pub fn settle(
 ) -> Vec<[f64; 3]> {
     let n = fits.len();
     let block = block.max(1);
+    // The most a written coordinate differs from the computed one: half float32's spacing
+    // where the writer uses float32 (a fixed fraction of the cube's edge, so the choice below
+    // is the same for translated inputs).
+    let delta = 0.5 * FLOAT32_SPACING * geom.h * geom.n as f64;
     let may_free: Vec<bool> = keys
         .iter()
         .zip(fits)
@@ -73,7 +83,7 @@ pub fn settle(
                     options(b).iter().all(|pb| {
                         options(c)
                             .iter()
-                            .all(|pc| sound([f.free_pos, *pb, *pc], reference))
+                            .all(|pc| sound([f.free_pos, *pb, *pc], reference, delta))
                     })
                 });
             if free_ok { f.free_pos } else { f.pos }
@@ -92,18 +102,17 @@ fn normal(t: [[f64; 3]; 3]) -> [f64; 3] {
     ]
 }
 
-/// Whether triangle `t` keeps [`MIN_SHAPE`] and turns the way `reference` does, in `f64`
-/// and with its corners rounded to `f32`.
-fn sound(t: [[f64; 3]; 3], reference: [f64; 3]) -> bool {
-    let rounded = t.map(|p| p.map(|x| x as f32 as f64));
-    [t, rounded].iter().all(|t| {
-        let nrm = normal(*t);
-        let len2 = |a: usize, b: usize| (0..3).map(|d| (t[a][d] - t[b][d]).powi(2)).sum::<f64>();
-        let longest = len2(0, 1).max(len2(1, 2)).max(len2(2, 0));
-        let area2 = (0..3).map(|d| nrm[d] * nrm[d]).sum::<f64>().sqrt();
-        let turn: f64 = (0..3).map(|d| nrm[d] * reference[d]).sum();
-        area2 > MIN_SHAPE * longest && turn > 0.0
-    })
+/// Whether triangle `t` keeps [`MIN_SHAPE`] and turns the way `reference` does, with a
+/// doubled area beyond what rounding each coordinate by up to `delta` could undo
+/// ([`ROUNDING_GUARD`]).
+fn sound(t: [[f64; 3]; 3], reference: [f64; 3], delta: f64) -> bool {
+    let nrm = normal(t);
+    let len2 = |a: usize, b: usize| (0..3).map(|d| (t[a][d] - t[b][d]).powi(2)).sum::<f64>();
+    let longest = len2(0, 1).max(len2(1, 2)).max(len2(2, 0));
+    let area2 = (0..3).map(|d| nrm[d] * nrm[d]).sum::<f64>().sqrt();
+    let turn: f64 = (0..3).map(|d| nrm[d] * reference[d]).sum();
+    let rounding = 4.0 * 3f64.sqrt() * delta * longest.sqrt() + 12.0 * delta * delta;
+    area2 > MIN_SHAPE * longest && area2 > ROUNDING_GUARD * rounding && turn > 0.0
 }
 
 #[cfg(test)]

@@ -5,6 +5,13 @@
 use super::EdgeKey;
 use crate::error::{Error, Result};
 
+/// The largest float32 spacing, relative to the cube's edge, at which output vertices are
+/// written as float32 (else float64): float32 then keeps the input's resolution, and every
+/// written coordinate is within half of this of the value computed. The writer
+/// (`io::mesh_write`) picks the format by it; the vertex fit (`surface`) keeps triangles
+/// large enough that rounding this fine cannot collapse or flip them.
+pub const FLOAT32_SPACING: f64 = 1.0 / (1u64 << 20) as f64;
+
 /// Geometry of the global grid: node `(i, j, k)` sits at `origin + h·(i, j, k)`; `n` cells per
 /// axis, so node indices run over `0..=n`.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -19,5 +19,5 @@ pub mod points;
 pub use field::{Axis, Blend, Detail, FIELD_LIMIT, Leaf, MAX_SHIFT, VALUE_LIMIT, WEIGHT_BITS};
 pub use geom::{Aabb, Cube, Rigid};
 pub use keys::{CellKey, EdgeKey, MAX_LEVEL, demorton3, morton3};
-pub use mesh::{GridGeom, TileMesh};
+pub use mesh::{FLOAT32_SPACING, GridGeom, TileMesh};
 pub use points::{Attributes, PointBatch, Viewpoint};

@@ -206,3 +206,22 @@ print(int((got == 255).all()), int(np.abs(got - rgb).max()), int((rgb != 255).an
          not all white)"
     );
 }
+
+#[test]
+fn demo_reports_no_degenerate_triangles_and_trimesh_calls_it_watertight() {
+    let d = tempfile::tempdir().unwrap();
+    let dir = d.path().join("demo");
+    let out = ok(&["demo", "-o", s(&dir), "--progress", "none"]);
+    assert!(out.contains("degenerate triangles 0,"), "{out}");
+    assert!(out.contains("watertight: yes"), "{out}");
+    let test = "demo_reports_no_degenerate_triangles_and_trimesh_calls_it_watertight";
+    if python_has("trimesh", test) {
+        let script = "import sys, trimesh\nprint(trimesh.load(sys.argv[1]).is_watertight)";
+        assert_eq!(python(script, &[&dir.join("demo.ply")]), "True");
+    }
+    let left: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert_eq!(left.len(), 3, "the demo left {left:?}");
+}
