@@ -17,7 +17,7 @@
 //! modification time and a content fingerprint, and every option that changes the output's
 //! bytes. `--resume` compares it with the run being started and refuses, naming what differs,
 //! before anything in the directory is used. The fingerprint is the CRC-32 of the size and of
-//! [`FINGERPRINT_WINDOWS`] windows of [`FINGERPRINT_WINDOW_BYTES`] spread evenly over the
+//! 16 windows of 64 KiB spread evenly over the
 //! file, first and last included: a change that keeps the size, the modification time and
 //! every sampled byte is not seen, but the check costs the same 1 MiB read for a
 //! hundred-gigabyte scan as for a small one, at the start and at every resume.
