@@ -1276,27 +1276,6 @@ fn option_cases(c: &mut Corpus) {
     });
 }
 
-/// Files and directories under `dir` whose names hold `.tmp-`.
-fn temp_files(dir: &Path) -> Vec<PathBuf> {
-    let mut out = Vec::new();
-    let mut stack = vec![dir.to_path_buf()];
-    while let Some(d) = stack.pop() {
-        let Ok(rd) = std::fs::read_dir(&d) else {
-            continue;
-        };
-        for e in rd.flatten() {
-            let p = e.path();
-            if e.file_name().to_string_lossy().contains(".tmp-") {
-                out.push(p.clone());
-            }
-            if e.file_type().map(|t| t.is_dir()).unwrap_or(false) {
-                stack.push(p);
-            }
-        }
-    }
-    out
-}
-
 #[test]
 fn malformed_inputs_fail_cleanly_naming_file_and_place() {
     let t0 = Instant::now();

@@ -2,33 +2,11 @@
 //! outputs that are inputs, resume identity, options checked before any work, exit codes,
 //! failed and killed runs.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Stdio;
 use std::time::{Duration, Instant};
 
-use super::common::{bin, fails, ok, s, usage};
-
-/// Every temporary file or directory (`*.tmp-<pid>`, `*.faces`) under `dir`.
-fn temp_files(dir: &Path) -> Vec<PathBuf> {
-    let mut out = Vec::new();
-    let mut stack = vec![dir.to_path_buf()];
-    while let Some(d) = stack.pop() {
-        let Ok(rd) = std::fs::read_dir(&d) else {
-            continue;
-        };
-        for e in rd.flatten() {
-            let p = e.path();
-            let name = e.file_name().to_string_lossy().into_owned();
-            if name.contains(".tmp-") {
-                out.push(p.clone());
-            }
-            if p.is_dir() {
-                stack.push(p);
-            }
-        }
-    }
-    out
-}
+use super::common::{bin, fails, ok, s, temp_files, usage};
 
 /// The names in `dir`, sorted.
 fn names(dir: &Path) -> Vec<String> {
