@@ -132,12 +132,15 @@ pub trait PointReader: Send + Sync {
     fn positions_f32(&self) -> bool {
         false
     }
+    /// Do not check the normals the file carries: they are ignored (normals are estimated).
+    /// A format without normals has nothing to skip.
+    fn ignore_normals(&mut self) {}
     /// Split the points into chunks of about `target_points` points each, in file order.
     /// Chunks cover every point exactly once.
     fn chunks(&self, target_points: u64) -> Result<Vec<ChunkSpec>>;
     /// Append the chunk's points to `out`, carrying the attributes of [`PointReader::attributes`].
     /// A NaN or infinite coordinate, or a normal that is not finite or is zero
-    /// ([`invalid_normal_msg`]), is an error naming the element, or, with `skip_invalid`, the
+    /// ([`invalid_normal_msg`], unless [`PointReader::ignore_normals`]), is an error naming the element, or, with `skip_invalid`, the
     /// point is dropped and counted.
     fn read_chunk(
         &self,

@@ -48,7 +48,7 @@ pub struct Inputs {
 impl Inputs {
     /// Open `inputs` and decide the store's attributes and record layout.
     pub fn open(inputs: &[InputSpec], params: &StoreParams) -> Result<Inputs> {
-        let readers = open_inputs(inputs)?;
+        let mut readers = open_inputs(inputs)?;
         let total: u64 = readers.iter().map(|r| r.len()).sum();
         if total == 0 {
             return Err(Error::input(
@@ -80,6 +80,8 @@ impl Inputs {
         };
         let mut specs: Vec<InputSpec> = inputs.to_vec();
         if estimate_normals {
+            // The inputs' normals are not used, so their values are no error.
+            readers.iter_mut().for_each(|r| r.ignore_normals());
             default_viewpoints(&mut specs, &readers);
             attrs.normal = false;
             attrs.source = specs.iter().any(|i| i.viewpoint.is_some());

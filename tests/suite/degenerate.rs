@@ -66,6 +66,18 @@ fn nan_normals_are_rejected_at_ingest() {
     let err = fails(&["reconstruct", s(&ply), "-o", s(&out), "--progress", "none"]);
     assert!(err.contains(&want), "{err}");
     assert!(!out.exists());
+    // Normals that are estimated ignore the file's, bad ones included.
+    let st = d.path().join("est");
+    ok(&[
+        "ingest",
+        s(&ply),
+        "-o",
+        s(&st),
+        "--normals",
+        "estimate",
+        "--progress",
+        "none",
+    ]);
     // An infinite normal in a text file names the element and its line.
     let xyz = d.path().join("scan.xyz");
     let mut text = String::new();

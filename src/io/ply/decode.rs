@@ -81,6 +81,7 @@ impl PlyReader {
                 ));
             }
             if let Some([a, b, c]) = l.normal
+                && !self.ignore_normals
                 && let Some(msg) = invalid_normal_msg([get(rec, a), get(rec, b), get(rec, c)])
             {
                 if skip_invalid {
@@ -210,6 +211,7 @@ impl PlyReader {
                 ));
             }
             if let Some([a, b, c]) = self.layout.normal
+                && !self.ignore_normals
                 && let Some(msg) = invalid_normal_msg([vals[a.at], vals[b.at], vals[c.at]])
             {
                 if skip_invalid {

@@ -48,6 +48,8 @@ struct Layout {
 /// A PLY file opened for reading points.
 pub struct PlyReader {
     path: PathBuf,
+    /// The normals are ignored, so not checked ([`PointReader::ignore_normals`]).
+    ignore_normals: bool,
     file: File,
     header: PlyHeader,
     /// Index of the vertex element.
@@ -174,6 +176,7 @@ impl PlyReader {
         };
         let stride = if binary { off } else { el.props.len() };
         let mut r = PlyReader {
+            ignore_normals: false,
             path: path.to_path_buf(),
             file,
             vertex,
@@ -380,6 +383,10 @@ impl PlyReader {
 }
 
 impl PointReader for PlyReader {
+    fn ignore_normals(&mut self) {
+        self.ignore_normals = true;
+    }
+
     fn path(&self) -> &Path {
         &self.path
     }

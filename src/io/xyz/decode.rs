@@ -108,6 +108,7 @@ impl XyzReader {
                 ));
             }
             if let Some(at) = layout.normal_at()
+                && !self.ignore_normals
                 && let Some(msg) = invalid_normal_msg([vals[at], vals[at + 1], vals[at + 2]])
             {
                 if skip_invalid {

@@ -47,6 +47,8 @@ pub struct XyzReader {
     file_len: u64,
     window: u64,
     layout: Layout,
+    /// The normals are ignored, so not checked ([`PointReader::ignore_normals`]).
+    ignore_normals: bool,
     header: Option<PtsHeader>,
     /// Marks of data lines 0, [`INDEX_STEP`], 2·[`INDEX_STEP`]…, then the mark past the last
     /// line (its `index` is the number of points). Never empty: open fails without points.
@@ -136,6 +138,7 @@ impl XyzReader {
         })?;
         index.push(end);
         Ok(XyzReader {
+            ignore_normals: false,
             path: path.to_path_buf(),
             file,
             file_len,
@@ -187,6 +190,10 @@ impl XyzReader {
 }
 
 impl PointReader for XyzReader {
+    fn ignore_normals(&mut self) {
+        self.ignore_normals = true;
+    }
+
     fn path(&self) -> &Path {
         &self.path
     }
