@@ -15,7 +15,7 @@ use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::path::{Path, PathBuf};
 
 use crate::error::{Error, IoContext, Location, Result};
-use crate::io::{ChunkSpec, ChunkStats, Format, PointReader, non_finite_axis, non_finite_msg};
+use crate::io::{ChunkSpec, ChunkStats, Format, PointReader, invalid_coordinate_msg};
 use crate::types::{Aabb, Attributes, PointBatch};
 
 /// Points decoded at a time within a chunk (bounds the `las::Point` buffer).
@@ -473,17 +473,12 @@ impl PointReader for LasReader {
             }
             for (k, p) in points.iter().enumerate() {
                 let xyz = [p.x, p.y, p.z];
-                if let Some(axis) = non_finite_axis(xyz) {
+                if let Some(msg) = invalid_coordinate_msg(xyz) {
                     if skip_invalid {
                         stats.skipped_invalid += 1;
                         continue;
                     }
-                    let v = match axis {
-                        "x" => p.x,
-                        "y" => p.y,
-                        _ => p.z,
-                    };
-                    return Err(self.element_error(at + k as u64, non_finite_msg(axis, v)));
+                    return Err(self.element_error(at + k as u64, msg));
                 }
                 out.pos.push(xyz);
                 out.intensity.push(f32::from(p.intensity));

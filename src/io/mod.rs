@@ -285,23 +285,25 @@ pub fn record_chunks(total: u64, target: u64, byte_of: impl Fn(u64) -> u64) -> V
     out
 }
 
-/// Which coordinate of `p` is not finite, if any.
+/// What is wrong with a point's coordinates `p`, if anything: the first that is NaN or
+/// infinite, named with its value.
 #[inline]
-pub fn non_finite_axis(p: [f64; 3]) -> Option<&'static str> {
-    if !p[0].is_finite() {
-        Some("x")
-    } else if !p[1].is_finite() {
-        Some("y")
-    } else if !p[2].is_finite() {
-        Some("z")
-    } else {
-        None
-    }
+pub fn invalid_coordinate_msg(p: [f64; 3]) -> Option<String> {
+    let (axis, v) = ["x", "y", "z"]
+        .into_iter()
+        .zip(p)
+        .find(|(_, v)| !v.is_finite())?;
+    Some(format!(
+        "{axis} is {v}, expected a finite coordinate (use --skip-invalid to drop such points)"
+    ))
 }
 
-/// Message for a non-finite coordinate.
-pub fn non_finite_msg(axis: &str, v: f64) -> String {
-    format!("{axis} is {v}, expected a finite coordinate (use --skip-invalid to drop such points)")
+/// What makes the point at `p` with normal `normal` (when it carries one that is checked)
+/// invalid, if anything: a coordinate ([`invalid_coordinate_msg`]) first, then the normal
+/// ([`invalid_normal_msg`]). Every reader's one check per point.
+#[inline]
+pub fn invalid_point_msg(p: [f64; 3], normal: Option<[f64; 3]>) -> Option<String> {
+    invalid_coordinate_msg(p).or_else(|| normal.and_then(invalid_normal_msg))
 }
 
 /// What is wrong with a point's normal `n` (as read, before it is narrowed to the store's

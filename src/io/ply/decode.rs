@@ -4,7 +4,7 @@
 use super::{Field, PlyReader, Scalar};
 use crate::error::{Error, Location, Result};
 use crate::io::mmap::Window;
-use crate::io::{ChunkSpec, ChunkStats, invalid_normal_msg, non_finite_axis, non_finite_msg};
+use crate::io::{ChunkSpec, ChunkStats, invalid_point_msg};
 use crate::types::PointBatch;
 
 impl PlyReader {
@@ -60,30 +60,11 @@ impl PlyReader {
         out.pos.reserve(n);
         for (i, rec) in win.chunks_exact(self.stride).take(n).enumerate() {
             let p = [get(rec, fx), get(rec, fy), get(rec, fz)];
-            if let Some(axis) = non_finite_axis(p) {
-                if skip_invalid {
-                    stats.skipped_invalid += 1;
-                    continue;
-                }
-                let index = chunk.first_index + i as u64;
-                let v = match axis {
-                    "x" => p[0],
-                    "y" => p[1],
-                    _ => p[2],
-                };
-                return Err(Error::format(
-                    &self.path,
-                    Location::Element {
-                        index,
-                        byte: self.vertex_start + index * self.stride as u64,
-                    },
-                    non_finite_msg(axis, v),
-                ));
-            }
-            if let Some([a, b, c]) = l.normal
-                && !self.ignore_normals
-                && let Some(msg) = invalid_normal_msg([get(rec, a), get(rec, b), get(rec, c)])
-            {
+            let normal = l
+                .normal
+                .filter(|_| !self.ignore_normals)
+                .map(|[a, b, c]| [get(rec, a), get(rec, b), get(rec, c)]);
+            if let Some(msg) = invalid_point_msg(p, normal) {
                 if skip_invalid {
                     stats.skipped_invalid += 1;
                     continue;
@@ -195,25 +176,12 @@ impl PlyReader {
                 ));
             }
             let p = [vals[fx.at], vals[fy.at], vals[fz.at]];
-            if let Some(axis) = non_finite_axis(p) {
-                if skip_invalid {
-                    stats.skipped_invalid += 1;
-                    continue;
-                }
-                let v = p[["x", "y", "z"].iter().position(|a| *a == axis).unwrap_or(0)];
-                return Err(Error::format(
-                    &self.path,
-                    Location::ElementLine {
-                        index,
-                        line: line_no,
-                    },
-                    non_finite_msg(axis, v),
-                ));
-            }
-            if let Some([a, b, c]) = self.layout.normal
-                && !self.ignore_normals
-                && let Some(msg) = invalid_normal_msg([vals[a.at], vals[b.at], vals[c.at]])
-            {
+            let normal = self
+                .layout
+                .normal
+                .filter(|_| !self.ignore_normals)
+                .map(|[a, b, c]| [vals[a.at], vals[b.at], vals[c.at]]);
+            if let Some(msg) = invalid_point_msg(p, normal) {
                 if skip_invalid {
                     stats.skipped_invalid += 1;
                     continue;

@@ -6,7 +6,7 @@ use super::text::{
 };
 use crate::error::{Error, Location, Result};
 use crate::io::mmap::Window;
-use crate::io::{ChunkSpec, ChunkStats, invalid_normal_msg, non_finite_axis, non_finite_msg};
+use crate::io::{ChunkSpec, ChunkStats, invalid_point_msg};
 use crate::types::PointBatch;
 
 impl XyzReader {
@@ -87,30 +87,11 @@ impl XyzReader {
                 None => None,
             };
             let p = [vals[0], vals[1], vals[2]];
-            if let Some(axis) = non_finite_axis(p) {
-                if skip_invalid {
-                    stats.skipped_invalid += 1;
-                    index += 1;
-                    continue;
-                }
-                let v = match axis {
-                    "x" => p[0],
-                    "y" => p[1],
-                    _ => p[2],
-                };
-                return Err(Error::format(
-                    &self.path,
-                    Location::ElementLine {
-                        index,
-                        line: this_line,
-                    },
-                    non_finite_msg(axis, v),
-                ));
-            }
-            if let Some(at) = layout.normal_at()
-                && !self.ignore_normals
-                && let Some(msg) = invalid_normal_msg([vals[at], vals[at + 1], vals[at + 2]])
-            {
+            let normal = layout
+                .normal_at()
+                .filter(|_| !self.ignore_normals)
+                .map(|at| [vals[at], vals[at + 1], vals[at + 2]]);
+            if let Some(msg) = invalid_point_msg(p, normal) {
                 if skip_invalid {
                     stats.skipped_invalid += 1;
                     index += 1;
