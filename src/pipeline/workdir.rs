@@ -254,7 +254,6 @@ pub fn claim(dir: &Path, identity: &RunIdentity, resume: bool) -> Result<Lease> 
                 ),
             ));
         }
-        atomic::remove_stale_temps(dir, false);
         std::fs::create_dir(dir)
             .map_err(|e| Error::input(dir, format!("cannot create the work directory: {e}")))?;
         atomic::write(

@@ -16,7 +16,7 @@ pub const SAMPLE_WINDOW_POINTS: u64 = crate::store::MIN_CHUNK_POINTS;
 /// The sample reads about one window in this many...
 pub const SAMPLE_ONE_IN: usize = 64;
 /// ...and at least this many windows (fewer only when the inputs have fewer).
-pub const SAMPLE_MIN_CHUNKS: usize = 64;
+pub const SAMPLE_MIN_WINDOWS: usize = 64;
 
 /// The provisional bounds: the headers' where every input has them (LAS, no read at all),
 /// else the bounds of a deterministic sample of about one window in [`SAMPLE_ONE_IN`] (every
@@ -31,7 +31,7 @@ pub fn provisional(
     if let Some(b) = inputs.header_bounds() {
         return Ok(b);
     }
-    let want = (chunks.len() / SAMPLE_ONE_IN).max(SAMPLE_MIN_CHUNKS);
+    let want = (chunks.len() / SAMPLE_ONE_IN).max(SAMPLE_MIN_WINDOWS);
     let stride = (chunks.len() / want).max(1);
     let sample: Vec<&(usize, ChunkSpec)> = chunks
         .iter()
