@@ -37,6 +37,7 @@ pub mod metrics;
 pub mod normals;
 pub mod pipeline;
 pub mod recon;
+pub mod spectral;
 pub mod store;
 pub mod surface;
 pub mod synth;
