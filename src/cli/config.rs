@@ -19,6 +19,7 @@ use super::args::{
     SynthArgs,
 };
 use super::paths;
+pub use super::spectral::SpectralConfig;
 
 /// zstd levels `--zstd-level` accepts: zstd's fast levels from -7 up to its level 19 (20 and
 /// above need zstd's "ultra" mode and far more memory).
@@ -53,6 +54,8 @@ pub enum Config {
     Info(InfoConfig),
     /// `scanflow demo`.
     Demo(DemoConfig),
+    /// `scanflow filter`, `resample` and `spectrum`.
+    Spectral(SpectralConfig),
 }
 
 impl Config {
@@ -65,6 +68,9 @@ impl Config {
             Cmd::Check(a) => Config::Check(CheckConfig::new(a)),
             Cmd::Info(a) => Config::Info(InfoConfig::new(a)?),
             Cmd::Demo(a) => Config::Demo(DemoConfig::new(a)?),
+            Cmd::Filter(a) => Config::Spectral(SpectralConfig::filter(a)?),
+            Cmd::Resample(a) => Config::Spectral(SpectralConfig::resample(a)?),
+            Cmd::Spectrum(a) => Config::Spectral(SpectralConfig::spectrum(a)?),
         })
     }
 }
@@ -80,7 +86,8 @@ pub struct RunConfig {
 }
 
 impl RunConfig {
-    fn new(c: &Common) -> Result<RunConfig> {
+    /// Check threads, memory and progress.
+    pub(super) fn new(c: &Common) -> Result<RunConfig> {
         if c.threads > MAX_THREADS {
             bail!(
                 "--threads {}: expected at most {MAX_THREADS} (0: one per core)",
@@ -118,7 +125,8 @@ pub struct NormalsConfig {
 }
 
 impl NormalsConfig {
-    fn new(n: &NormalOpts) -> Result<NormalsConfig> {
+    /// Check the normal options.
+    pub(super) fn new(n: &NormalOpts) -> Result<NormalsConfig> {
         if n.neighbours < MIN_NEIGHBOURS {
             bail!(
                 "--neighbours {}: a plane fit needs at least {MIN_NEIGHBOURS}",
@@ -157,7 +165,12 @@ pub struct Inputs {
 }
 
 impl Inputs {
-    fn new(files: Vec<PathBuf>, conf: Option<PathBuf>, viewpoints: &[String]) -> Result<Inputs> {
+    /// Check the inputs and their viewpoints.
+    pub(super) fn new(
+        files: Vec<PathBuf>,
+        conf: Option<PathBuf>,
+        viewpoints: &[String],
+    ) -> Result<Inputs> {
         let viewpoints: Vec<[f64; 3]> = viewpoints
             .iter()
             .map(|v| parse_point(v))
@@ -293,6 +306,28 @@ pub enum Points {
     Files(Inputs, NormalsConfig),
 }
 
+impl Points {
+    /// One directory argument is a store; anything else is ingested into the work directory.
+    pub(super) fn new(
+        inputs: Vec<PathBuf>,
+        conf: Option<PathBuf>,
+        n: &NormalOpts,
+    ) -> Result<Points> {
+        let normals = NormalsConfig::new(n)?;
+        Ok(
+            if conf.is_none() && inputs.len() == 1 && inputs[0].is_dir() {
+                Points::Store {
+                    ignores_normal_options: normals.mode != NormalsMode::Auto
+                        || !n.viewpoint.is_empty(),
+                    dir: inputs[0].clone(),
+                }
+            } else {
+                Points::Files(Inputs::new(inputs, conf, &n.viewpoint)?, normals)
+            },
+        )
+    }
+}
+
 /// `scanflow reconstruct`.
 pub struct ReconstructConfig {
     /// Threads, memory, progress.
@@ -364,17 +399,7 @@ impl ReconstructConfig {
         params.sigma_vox = smooth;
         params.fit = !a.no_fit;
         params.gpu = a.gpu.into();
-        let normals = NormalsConfig::new(&a.normal)?;
-        // One directory argument is a store; anything else is ingested into the work dir.
-        let points = if a.conf.is_none() && a.inputs.len() == 1 && a.inputs[0].is_dir() {
-            Points::Store {
-                ignores_normal_options: normals.mode != NormalsMode::Auto
-                    || !a.normal.viewpoint.is_empty(),
-                dir: a.inputs[0].clone(),
-            }
-        } else {
-            Points::Files(Inputs::new(a.inputs, a.conf, &a.normal.viewpoint)?, normals)
-        };
+        let points = Points::new(a.inputs, a.conf, &a.normal)?;
         Ok(ReconstructConfig {
             run,
             points,

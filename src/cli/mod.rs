@@ -34,6 +34,7 @@ mod ingest;
 mod paths;
 mod reconstruct;
 mod report;
+mod spectral;
 mod synth;
 
 use anyhow::Result;
@@ -51,6 +52,7 @@ pub fn run(config: Config) -> Result<()> {
         Config::Check(c) => check::run(&c),
         Config::Info(c) => info::run(&c, &start(&c.run)?),
         Config::Demo(c) => demo::run(&c, &start(&c.run)?),
+        Config::Spectral(c) => spectral::run(&c, &start(&c.run)?),
     }
 }
 

@@ -10,9 +10,11 @@ use anyhow::{Result, bail};
 use scanflow::Error;
 use scanflow::exec::Ctx;
 use scanflow::io::atomic;
+use scanflow::normals::{NormalParams, NormalsMode};
 use scanflow::pipeline::ingest::{StoreSource, WORK_STORE, open_or_ingest};
 use scanflow::pipeline::workdir::{self, Lease, RunIdentity};
 use scanflow::pipeline::{ReconParams, ReconStats};
+use scanflow::store::Store;
 
 use super::config::{Points, ReconstructConfig};
 use super::ingest::input_specs;
@@ -35,57 +37,100 @@ pub fn reconstruct(
     params: &ReconParams,
     keep_work: bool,
 ) -> Result<ReconStats> {
-    let (source, normals) = match points {
-        Points::Store {
-            dir,
-            ignores_normal_options,
-        } => {
-            if *ignores_normal_options {
-                log::warn!(
-                    "{}: a store keeps the normals it was ingested with; --normals and --viewpoint apply to `ingest`",
-                    dir.display()
-                );
-            }
-            (StoreSource::Store(dir.clone()), None)
-        }
-        Points::Files(inputs, normals) => {
-            (StoreSource::Points(input_specs(inputs)?), Some(normals))
-        }
+    let job = WorkRun {
+        points,
+        output,
+        work_dir: &params.work_dir,
+        resume: params.resume,
+        keep_work,
     };
-    let (mode, normal_params) = normals.map(|n| (n.mode, n.params)).unwrap_or_default();
-    let work = workdir::resolve(&params.work_dir, output)?;
-    check_paths(&source, output, &work)?;
-    for p in atomic::remove_stale_temps(output, false) {
-        log::info!("removed {}, left by a killed run", p.display());
-    }
-    let identity = RunIdentity::new(&source, mode, &normal_params, params)?;
-    let lease = workdir::claim(&work, &identity, params.resume)?;
-    signals::set_note(Some(kept_note(&work)));
-    let params = ReconParams {
-        work_dir: work.clone(),
-        ..params.clone()
-    };
-    let run = open_or_ingest(&source, &work, params.resume, mode, normal_params, ctx)
-        .and_then(|store| scanflow::pipeline::reconstruct(&store, output, &params, ctx))
-        .map_err(|e| name_inputs(e, &work.join(WORK_STORE), &source));
-    match run {
-        Ok(st) => {
-            signals::set_note(Some(format!("{} is complete", output.display())));
-            if !keep_work {
-                let left = lease.remove()?;
-                if !left.is_empty() {
+    job.run(
+        ctx,
+        |source, mode, normal_params| RunIdentity::new(source, mode, normal_params, params),
+        |store, work| {
+            let params = ReconParams {
+                work_dir: work.to_path_buf(),
+                ..params.clone()
+            };
+            scanflow::pipeline::reconstruct(store, output, &params, ctx)
+        },
+    )
+}
+
+/// A command that reads a store, or point files ingested into a work directory, and writes
+/// `output`.
+pub struct WorkRun<'a> {
+    /// What to read.
+    pub points: &'a Points,
+    /// What to write (a file, or a directory that must not exist).
+    pub output: &'a Path,
+    /// The work directory asked for.
+    pub work_dir: &'a Path,
+    /// `--resume`.
+    pub resume: bool,
+    /// `--keep-work`.
+    pub keep_work: bool,
+}
+
+impl WorkRun<'_> {
+    /// Take the work directory (made and marked, or resumed after `identity`'s check), open
+    /// or ingest the store, run `body` on it, and remove the work directory unless
+    /// `keep_work`; after a failure keep it only when a resume can reuse it.
+    pub fn run<T>(
+        &self,
+        ctx: &Ctx,
+        identity: impl FnOnce(&StoreSource, NormalsMode, &NormalParams) -> scanflow::Result<RunIdentity>,
+        body: impl FnOnce(&Store, &Path) -> scanflow::Result<T>,
+    ) -> Result<T> {
+        let output = self.output;
+        let (source, normals) = match self.points {
+            Points::Store {
+                dir,
+                ignores_normal_options,
+            } => {
+                if *ignores_normal_options {
                     log::warn!(
-                        "{}: kept: it holds {} entries scanflow did not make",
-                        work.display(),
-                        left.len()
+                        "{}: a store keeps the normals it was ingested with; --normals and --viewpoint apply to `ingest`",
+                        dir.display()
                     );
                 }
+                (StoreSource::Store(dir.clone()), None)
             }
-            Ok(st)
+            Points::Files(inputs, normals) => {
+                (StoreSource::Points(input_specs(inputs)?), Some(normals))
+            }
+        };
+        let (mode, normal_params) = normals.map(|n| (n.mode, n.params)).unwrap_or_default();
+        let work = workdir::resolve(self.work_dir, output)?;
+        check_paths(&source, output, &work)?;
+        for p in atomic::remove_stale_temps(output, false) {
+            log::info!("removed {}, left by a killed run", p.display());
         }
-        Err(e) => {
-            signals::set_note(None);
-            Err(after_failure(lease, e))
+        let identity = identity(&source, mode, &normal_params)?;
+        let lease = workdir::claim(&work, &identity, self.resume)?;
+        signals::set_note(Some(kept_note(&work)));
+        let run = open_or_ingest(&source, &work, self.resume, mode, normal_params, ctx)
+            .and_then(|store| body(&store, &work))
+            .map_err(|e| name_inputs(e, &work.join(WORK_STORE), &source));
+        match run {
+            Ok(st) => {
+                signals::set_note(Some(format!("{} is complete", output.display())));
+                if !self.keep_work {
+                    let left = lease.remove()?;
+                    if !left.is_empty() {
+                        log::warn!(
+                            "{}: kept: it holds {} entries scanflow did not make",
+                            work.display(),
+                            left.len()
+                        );
+                    }
+                }
+                Ok(st)
+            }
+            Err(e) => {
+                signals::set_note(None);
+                Err(after_failure(lease, e))
+            }
         }
     }
 }

@@ -45,15 +45,27 @@ pub struct PointPlyWriter {
     stride: usize,
     /// Scratch for encoding a block of records.
     scratch: Vec<u8>,
+    /// Positions as double, and an extra scalar property.
+    opts: PointFileOptions,
+}
+
+/// Options of a point file beyond its attributes.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct PointFileOptions {
+    /// Positions as `double` instead of `float` (coordinates far from the origin).
+    pub double: bool,
+    /// Name of one extra `float` property per point, written after the attributes.
+    pub scalar: Option<String>,
 }
 
 /// The PLY header for `count` points carrying `attrs`.
-fn header(count: u64, attrs: Attributes) -> String {
+fn header(count: u64, attrs: Attributes, opts: &PointFileOptions) -> String {
     let mut h = String::with_capacity(256);
     h.push_str("ply\nformat binary_little_endian 1.0\ncomment written by scanflow\n");
     h.push_str(&format!("element vertex {count}\n"));
+    let ty = if opts.double { "double" } else { "float" };
     for n in ["x", "y", "z"] {
-        h.push_str(&format!("property float {n}\n"));
+        h.push_str(&format!("property {ty} {n}\n"));
     }
     if attrs.normal {
         for n in ["nx", "ny", "nz"] {
@@ -74,13 +86,19 @@ fn header(count: u64, attrs: Attributes) -> String {
     if attrs.confidence {
         h.push_str("property float confidence\n");
     }
+    if let Some(name) = &opts.scalar {
+        h.push_str(&format!("property float {name}\n"));
+    }
     h.push_str("end_header\n");
     h
 }
 
 /// Bytes of one record carrying `attrs`.
-fn record_bytes(attrs: Attributes) -> usize {
-    let mut n = 12;
+fn record_bytes(attrs: Attributes, opts: &PointFileOptions) -> usize {
+    let mut n = if opts.double { 24 } else { 12 };
+    if opts.scalar.is_some() {
+        n += 4;
+    }
     if attrs.normal {
         n += 12;
     }
@@ -106,6 +124,17 @@ impl PointPlyWriter {
     /// needs `color` (the alpha channel is written with the colour); asking for it alone is an
     /// [`Error::Usage`].
     pub fn create(path: &Path, count: u64, attrs: Attributes) -> Result<Self> {
+        Self::create_with(path, count, attrs, PointFileOptions::default())
+    }
+
+    /// [`PointPlyWriter::create`] with positions as `double` and an extra scalar when `opts`
+    /// says so.
+    pub fn create_with(
+        path: &Path,
+        count: u64,
+        attrs: Attributes,
+        opts: PointFileOptions,
+    ) -> Result<Self> {
         if attrs.alpha && !attrs.color {
             return Err(Error::Usage(format!(
                 "{}: cannot write alpha without colour (red green blue)",
@@ -123,11 +152,12 @@ impl PointPlyWriter {
             attrs,
             count,
             written: 0,
-            stride: record_bytes(attrs),
+            stride: record_bytes(attrs, &opts),
             scratch: Vec::new(),
+            opts,
         };
         // From here on, a failure drops `w`, which removes the temporary file.
-        let h = header(count, attrs);
+        let h = header(count, attrs, &w.opts);
         w.sink()?.write_all(h.as_bytes()).with_path(&w.tmp_path)?;
         Ok(w)
     }
@@ -165,8 +195,15 @@ impl PointPlyWriter {
 
     /// Check that `batch` carries what the header announces and holds writable values, so
     /// that a bad batch is refused whole, before any of its bytes is written.
-    fn check(&self, batch: &PointBatch) -> Result<()> {
+    fn check(&self, batch: &PointBatch, scalars: Option<&[f32]>) -> Result<()> {
         let n = batch.pos.len();
+        if self.opts.scalar.is_some() && scalars.map(|s| s.len()) != Some(n) {
+            return Err(Error::Usage(format!(
+                "{}: cannot write batch: the file has a scalar per point, the batch {} of {n}",
+                self.final_path.display(),
+                scalars.map_or(0, |s| s.len())
+            )));
+        }
         let left = self.count - self.written;
         if n as u64 > left {
             return Err(Error::Usage(format!(
@@ -204,7 +241,7 @@ impl PointPlyWriter {
         }
         for (i, p) in batch.pos.iter().enumerate() {
             for (axis, &v) in ["x", "y", "z"].iter().zip(p) {
-                if !(v as f32).is_finite() {
+                if !self.opts.double && !(v as f32).is_finite() || !v.is_finite() {
                     return Err(Error::Usage(format!(
                         "{}: point {}: {axis} is {v}, which a float32 cannot hold",
                         self.final_path.display(),
@@ -223,7 +260,15 @@ impl PointPlyWriter {
     /// count announced in the header; otherwise nothing of the batch is written and an
     /// [`Error::Usage`] says why.
     pub fn write(&mut self, batch: &PointBatch) -> Result<()> {
-        self.check(batch)?;
+        self.write_with(batch, None)
+    }
+
+    /// [`PointPlyWriter::write`] with the extra scalar of each point (required when the file
+    /// was created with one, ignored otherwise).
+    pub fn write_with(&mut self, batch: &PointBatch, scalars: Option<&[f32]>) -> Result<()> {
+        self.check(batch, scalars)?;
+        let double = self.opts.double;
+        let scalars = scalars.filter(|_| self.opts.scalar.is_some());
         let attrs = self.attrs;
         let stride = self.stride;
         let n = batch.pos.len();
@@ -236,7 +281,11 @@ impl PointPlyWriter {
             scratch.reserve(stride * (end - start));
             for i in start..end {
                 for v in batch.pos[i] {
-                    scratch.extend_from_slice(&(v as f32).to_le_bytes());
+                    if double {
+                        scratch.extend_from_slice(&v.to_le_bytes());
+                    } else {
+                        scratch.extend_from_slice(&(v as f32).to_le_bytes());
+                    }
                 }
                 if attrs.normal {
                     for v in batch.normal[i] {
@@ -259,6 +308,9 @@ impl PointPlyWriter {
                 }
                 if attrs.confidence {
                     scratch.extend_from_slice(&batch.confidence[i].to_le_bytes());
+                }
+                if let Some(s) = scalars {
+                    scratch.extend_from_slice(&s[i].to_le_bytes());
                 }
             }
             let tmp = &self.tmp_path;

@@ -16,6 +16,7 @@ mod global;
 pub mod ingest;
 mod points;
 pub mod reconstruct;
+pub mod spectral;
 mod tiles;
 pub mod workdir;
 

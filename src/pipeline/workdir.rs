@@ -1,7 +1,9 @@
-//! The work directory of a reconstruction, and who owns it.
+//! The work directory of a run (`reconstruct`, `filter`, `resample`, `spectrum`), and who owns
+//! it.
 //!
 //! A work directory holds the store ingested from point files (`store/`), the leaf and tile
-//! checkpoints (`leaves/`, `tiles/`), the run's identity (`run.json`) and its plan
+//! checkpoints (`leaves/`, `tiles/`) or the spectral patches (`patches/`, and
+//! `resampled.bin` while a resampling writes), the run's identity (`run.json`) and its plan
 //! (`solve.json`). scanflow removes only what it created and marked as its own:
 //!
 //! - A work directory scanflow creates gets a marker file ([`MARKER`]) before anything else.
@@ -53,6 +55,12 @@ const LEAVES: &str = "leaves";
 /// Tile checkpoints.
 const TILES: &str = "tiles";
 
+/// Spectral patch checkpoints.
+const PATCHES: &str = crate::pipeline::spectral::PATCHES_DIR;
+
+/// Resampled points waiting for their count to be known.
+const RESAMPLED: &str = crate::pipeline::spectral::RESAMPLED;
+
 /// Windows read for an input's fingerprint.
 const FINGERPRINT_WINDOWS: u64 = 16;
 
@@ -103,15 +111,32 @@ impl RunIdentity {
         normal_params: &NormalParams,
         params: &ReconParams,
     ) -> Result<RunIdentity> {
+        let options = [
+            ("command", "reconstruct".to_string()),
+            ("--depth", params.depth.to_string()),
+            ("--smooth", params.sigma_vox.to_string()),
+            ("--error", params.error.to_string()),
+            ("--min-points", params.min_points.to_string()),
+            ("--trim", params.trim.to_string()),
+            ("--no-fit", (!params.fit).to_string()),
+        ];
+        RunIdentity::with_options(source, normals, normal_params, &options)
+    }
+
+    /// The identity of a run of any command: its inputs, the normal options when it ingests
+    /// them, and `options`, every option that changes its output.
+    pub fn with_options(
+        source: &StoreSource,
+        normals: NormalsMode,
+        normal_params: &NormalParams,
+        options: &[(&str, String)],
+    ) -> Result<RunIdentity> {
         let mut e = BTreeMap::new();
         let mut put = |k: &str, v: String| e.insert(k.to_string(), v);
         put("scanflow", env!("CARGO_PKG_VERSION").to_string());
-        put("--depth", params.depth.to_string());
-        put("--smooth", params.sigma_vox.to_string());
-        put("--error", params.error.to_string());
-        put("--min-points", params.min_points.to_string());
-        put("--trim", params.trim.to_string());
-        put("--no-fit", (!params.fit).to_string());
+        for (k, v) in options {
+            put(k, v.clone());
+        }
         match source {
             StoreSource::Store(dir) => {
                 let manifest = dir.join(MANIFEST);
@@ -281,9 +306,11 @@ impl Lease {
     /// Whether a resume could reuse anything: a complete store or a leaf checkpoint.
     pub fn has_checkpoints(&self) -> bool {
         self.dir.join(WORK_STORE).join(MANIFEST).exists()
-            || std::fs::read_dir(self.dir.join(LEAVES))
-                .map(|mut d| d.next().is_some())
-                .unwrap_or(false)
+            || [LEAVES, PATCHES].iter().any(|d| {
+                std::fs::read_dir(self.dir.join(d))
+                    .map(|mut d| d.next().is_some())
+                    .unwrap_or(false)
+            })
     }
 
     /// Remove what scanflow put in the work directory, then the directory if that emptied
@@ -300,13 +327,13 @@ pub fn remove_owned(dir: &Path) -> Result<Vec<PathBuf>> {
         return Ok(Vec::new());
     }
     atomic::remove_stale_temps(dir, true);
-    for name in [WORK_STORE, LEAVES, TILES] {
+    for name in [WORK_STORE, LEAVES, TILES, PATCHES] {
         let p = dir.join(name);
         if p.is_dir() {
             std::fs::remove_dir_all(&p).with_path(&p)?;
         }
     }
-    for name in [RUN_FILE, SOLVE_FILE, MARKER] {
+    for name in [RUN_FILE, SOLVE_FILE, RESAMPLED, MARKER] {
         let p = dir.join(name);
         if p.exists() {
             std::fs::remove_file(&p).with_path(&p)?;

@@ -12,4 +12,5 @@ mod normals;
 mod ownership;
 mod precision;
 mod recon;
+mod spectral;
 mod store_verify;

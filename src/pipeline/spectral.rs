@@ -1,0 +1,972 @@
+//! Spectral processing chained over a store (the [`spectral`](crate::spectral) module docs
+//! give the math): pass 1 lays out, fits and treats every cell's patches, wave by wave, and
+//! checkpoints them in the work directory (`patches/`); pass 2 visits the cells in Morton order,
+//! blends each cell's points (or resamples its patches) from the patches reaching it, and
+//! streams the points to the output.
+//!
+//! Memory: a wave of cells holds their points, halos and patches ([`PASS1_BYTES_PER_POINT`]
+//! per point, waves of at most [`Share::NormalsWave`]); decoded cells and patch files are
+//! kept in byte-bounded caches ([`Share::NormalsCellCache`] each, at least
+//! [`MIN_CACHE_BYTES`]).
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Instant;
+
+use rayon::prelude::*;
+
+use crate::error::{Error, IoContext, Result};
+use crate::exec::Ctx;
+use crate::exec::budget::Share;
+use crate::exec::cache::Lru;
+use crate::io::atomic::{self, Durability};
+use crate::io::ply_write::{PointFileOptions, PointPlyWriter};
+use crate::spectral::cell::{self, Around, CellPatches, CellPlan};
+use crate::spectral::checkpoint;
+use crate::spectral::layout::LayoutParams;
+use crate::spectral::patch::{Overlap, Patch, PatchWork, Treatment};
+use crate::store::Store;
+use crate::types::{Aabb, Attributes, PointBatch};
+
+/// Bytes held per point of a cell in pass 1: its record decoded (about 64), its halo's share
+/// (as many again), the admission index (8), patch membership (8) and the patches' grids
+/// (about 2 nodes a point at 8 bytes, counting the overlap).
+pub const PASS1_BYTES_PER_POINT: u64 = 64 * 2 + 8 + 8 + 16;
+
+/// Bytes held per point of a cell in pass 2: its record decoded, the blended copy, the
+/// heaviest patch, and the patches around it (about 16).
+pub const PASS2_BYTES_PER_POINT: u64 = 64 * 2 + 4 + 16;
+
+/// Least capacity of each cache.
+pub const MIN_CACHE_BYTES: u64 = 16 << 20;
+
+/// Cells per worker thread in a wave.
+const CELLS_PER_THREAD: usize = 2;
+
+/// Name of the patch checkpoints' directory inside the work directory.
+pub const PATCHES_DIR: &str = "patches";
+
+/// Name of the file resampled points wait in (inside the work directory) until their count,
+/// which the output's header needs, is known.
+pub const RESAMPLED: &str = "resampled.bin";
+
+/// Options of a spectral run.
+#[derive(Debug, Clone)]
+pub struct SpectralParams {
+    /// Patch layout.
+    pub layout: LayoutParams,
+    /// Patch overlap.
+    pub overlap: Overlap,
+    /// The work directory (patch checkpoints go to `patches/` in it).
+    pub work_dir: PathBuf,
+    /// Reuse the patch checkpoints an earlier run of the same job left.
+    pub resume: bool,
+}
+
+/// What a run measured.
+#[derive(Debug, Clone, Default, serde::Serialize)]
+pub struct SpectralStats {
+    /// Points read.
+    pub points_in: u64,
+    /// Points written.
+    pub points_out: u64,
+    /// Store cells.
+    pub cells: usize,
+    /// Patches.
+    pub patches: u64,
+    /// Smallest, mean and largest patch (members).
+    pub patch_members: [f64; 3],
+    /// Mean and largest normal-cone aperture, degrees.
+    pub aperture_deg: [f64; 2],
+    /// Mean and largest RMS approximation error of the height fields, relative to the
+    /// bounding-box diagonal.
+    pub sda_rms_rel: [f64; 2],
+    /// Mean and largest Parseval error (RMS change of a patch's heights), relative to the
+    /// diagonal.
+    pub parseval_rel: [f64; 2],
+    /// Mean estimated noise (Wiener), relative to the diagonal.
+    pub noise_rel: f64,
+    /// Points whose blended normal took the least-squares fallback.
+    pub normal_fallback: u64,
+    /// Points no patch admitted (kept as they were).
+    pub unblended: u64,
+    /// Points in patches too small to approximate.
+    pub unpatched: u64,
+    /// Patches reused from an earlier run's checkpoints.
+    pub resumed_cells: usize,
+    /// The bounding-box diagonal.
+    pub diagonal: f64,
+    /// Seconds in pass 1 (layout, height fields, spectra, filters).
+    pub secs_patches: f64,
+    /// Seconds in pass 2 (blending or resampling, and writing).
+    pub secs_blend: f64,
+}
+
+/// Running sums over patches.
+#[derive(Default)]
+struct Sums {
+    n: u64,
+    members: [f64; 3],
+    aperture: [f64; 2],
+    sda: [f64; 2],
+    parseval: [f64; 2],
+    noise: f64,
+}
+
+impl Sums {
+    fn add(&mut self, p: &Patch) {
+        let m = p.members as f64;
+        if self.n == 0 {
+            self.members[0] = m;
+        }
+        self.n += 1;
+        self.members = [
+            self.members[0].min(m),
+            self.members[1] + m,
+            self.members[2].max(m),
+        ];
+        let a = p.aperture as f64;
+        self.aperture = [self.aperture[0] + a, self.aperture[1].max(a)];
+        let s = p.sda_rms as f64;
+        self.sda = [self.sda[0] + s, self.sda[1].max(s)];
+        let e = p.parseval_rms as f64;
+        self.parseval = [self.parseval[0] + e, self.parseval[1].max(e)];
+        self.noise += p.noise_rms as f64;
+    }
+
+    fn into_stats(self, st: &mut SpectralStats) {
+        let n = self.n.max(1) as f64;
+        let d = st.diagonal;
+        st.patches = self.n;
+        st.patch_members = [self.members[0], self.members[1] / n, self.members[2]];
+        st.aperture_deg = [
+            self.aperture[0] / n * 180.0 / std::f64::consts::PI,
+            self.aperture[1] * 180.0 / std::f64::consts::PI,
+        ];
+        st.sda_rms_rel = [self.sda[0] / n / d, self.sda[1] / d];
+        st.parseval_rel = [self.parseval[0] / n / d, self.parseval[1] / d];
+        st.noise_rel = self.noise / n / d;
+    }
+}
+
+/// What pass 1 keeps of a cell: where its patches reach.
+#[derive(Debug, Clone)]
+struct CellReach {
+    /// Union of its patches' world bounds (empty when it has none).
+    reach: Aabb,
+}
+
+/// A cache of decoded store cells.
+struct Cells<'a> {
+    store: &'a Store,
+    lru: Lru<usize, Arc<PointBatch>>,
+}
+
+impl Cells<'_> {
+    fn get(&mut self, i: usize) -> Result<Arc<PointBatch>> {
+        if let Some(c) = self.lru.get(&i) {
+            return Ok(Arc::clone(c));
+        }
+        let c = Arc::new(self.store.read_cell(i)?);
+        self.lru.insert(i, Arc::clone(&c), c.heap_bytes() as u64);
+        Ok(c)
+    }
+}
+
+/// The file of cell `i`'s patches.
+fn patch_path(dir: &Path, i: usize) -> PathBuf {
+    dir.join(format!("cell-{i:07}.sfp"))
+}
+
+/// Read a patch checkpoint.
+fn read_patches(path: &Path) -> Result<Vec<Patch>> {
+    let bytes = std::fs::read(path).with_path(path)?;
+    checkpoint::decode(&bytes).map_err(|m| Error::input(path, m))
+}
+
+/// The store's normals, or an error naming it.
+fn check_store(store: &Store) -> Result<()> {
+    if !store.layout.attrs.normal {
+        return Err(Error::input(
+            &store.dir,
+            "the points have no normals, which patches are laid out by: ingest with --normals auto or estimate",
+        ));
+    }
+    if store.manifest.point_count == 0 {
+        return Err(Error::input(&store.dir, "no points"));
+    }
+    Ok(())
+}
+
+/// The cells of a wave starting at `i` that fit `share` bytes at `per_point` (at least one).
+fn next_wave(store: &Store, i: usize, threads: usize, share: u64, per_point: u64) -> (usize, u64) {
+    let cells = &store.manifest.cells;
+    let (mut j, mut bytes) = (i, 0u64);
+    while j < cells.len() && j - i < CELLS_PER_THREAD * threads {
+        let b = cells[j].count * per_point;
+        if j > i && bytes + b > share {
+            break;
+        }
+        bytes += b;
+        j += 1;
+    }
+    (j, bytes)
+}
+
+/// The points of cells other than `c` within the box `reach`.
+fn gather_halo(
+    cells: &mut Cells<'_>,
+    c: usize,
+    reach: &Aabb,
+) -> Result<(Vec<[f64; 3]>, Vec<[f32; 3]>)> {
+    let (mut pos, mut nor) = (Vec::new(), Vec::new());
+    let entries = &cells.store.manifest.cells;
+    for o in 0..entries.len() {
+        if o == c || !reach.meets(&entries[o].bounds) {
+            continue;
+        }
+        let b = cells.get(o)?;
+        for (p, n) in b.pos.iter().zip(&b.normal) {
+            if reach.contains(*p) {
+                pos.push(*p);
+                nor.push(*n);
+            }
+        }
+    }
+    Ok((pos, nor))
+}
+
+/// Pass 1 over every cell: patches fitted and treated, checkpointed in `dir`. `inspect` sees
+/// each cell's points and patches as they are made (not for checkpoints reused).
+fn pass1(
+    store: &Store,
+    treat: &Treatment,
+    params: &SpectralParams,
+    ctx: &Ctx,
+    st: &mut SpectralStats,
+    sums: &mut Sums,
+    mut inspect: impl FnMut(usize, &PointBatch, &CellPatches) -> Result<()>,
+    raw: &(dyn Fn(usize, usize, &mut PatchWork) + Sync),
+) -> Result<Vec<CellReach>> {
+    let t0 = Instant::now();
+    let dir = params.work_dir.join(PATCHES_DIR);
+    std::fs::create_dir_all(&dir).with_path(&dir)?;
+    let entries = &store.manifest.cells;
+    let cache_cap = ctx
+        .budget
+        .share(Share::NormalsCellCache)
+        .max(MIN_CACHE_BYTES);
+    let _cache_permit = ctx
+        .budget
+        .acquire(cache_cap, "the cell cache of spectral patches")?;
+    let mut cells = Cells {
+        store,
+        lru: Lru::new(cache_cap),
+    };
+    let stage = ctx
+        .progress
+        .stage("patches", Some(store.manifest.point_count), "points");
+    let share = ctx.budget.share(Share::NormalsWave);
+    let mut reach = Vec::with_capacity(entries.len());
+    let mut i = 0;
+    while i < entries.len() {
+        let (j, bytes) = next_wave(store, i, ctx.threads(), share, PASS1_BYTES_PER_POINT);
+        let _permit = ctx
+            .budget
+            .acquire(bytes, "a wave of spectral patch cells")?;
+        let mut todo = Vec::new();
+        for c in i..j {
+            let path = patch_path(&dir, c);
+            if params.resume && path.exists() {
+                if let Ok(p) = read_patches(&path) {
+                    reach.push((c, cell_reach(&p)));
+                    p.iter().for_each(|q| sums.add(q));
+                    st.resumed_cells += 1;
+                    continue;
+                }
+            }
+            todo.push((c, cells.get(c)?));
+        }
+        let plans: Vec<CellPlan> = ctx.pool.install(|| {
+            todo.par_iter()
+                .map_init(PatchWork::default, |w, (_, b)| {
+                    cell::plan_cell(&b.pos, &b.normal, &params.layout, &params.overlap, w)
+                })
+                .collect()
+        });
+        let mut halos = Vec::with_capacity(todo.len());
+        for ((c, _), plan) in todo.iter().zip(&plans) {
+            let ext = entries[*c].bounds.extent().into_iter().fold(0f64, f64::max);
+            let r = entries[*c].bounds.grown(plan.reach.min(ext));
+            halos.push(gather_halo(&mut cells, *c, &r)?);
+        }
+        let fitted: Vec<CellPatches> = ctx.pool.install(|| {
+            todo.par_iter()
+                .zip(plans.par_iter().zip(halos.par_iter()))
+                .map_init(PatchWork::default, |w, ((c, b), (plan, (hp, hn)))| {
+                    cell::fit_cell(&b.pos, &b.normal, hp, hn, plan, treat, w, |k, w| {
+                        raw(*c, k, w)
+                    })
+                })
+                .collect()
+        });
+        drop(halos);
+        let written: Vec<Result<()>> = ctx.pool.install(|| {
+            todo.par_iter()
+                .zip(fitted.par_iter())
+                .map(|((c, _), f)| {
+                    atomic::write(
+                        &patch_path(&dir, *c),
+                        &checkpoint::encode(&f.patches),
+                        Durability::Renamed,
+                    )
+                })
+                .collect()
+        });
+        for w in written {
+            w?;
+        }
+        for ((c, b), f) in todo.iter().zip(&fitted) {
+            f.patches.iter().for_each(|q| sums.add(q));
+            st.unpatched += f.unpatched;
+            reach.push((*c, cell_reach(&f.patches)));
+            inspect(*c, b, f)?;
+        }
+        stage.inc(entries[i..j].iter().map(|e| e.count).sum());
+        i = j;
+    }
+    reach.sort_by_key(|r| r.0);
+    stage.finish(None);
+    st.secs_patches = t0.elapsed().as_secs_f64();
+    Ok(reach
+        .into_iter()
+        .map(|(_, r)| CellReach { reach: r })
+        .collect())
+}
+
+/// Union of the patches' world bounds.
+fn cell_reach(patches: &[Patch]) -> Aabb {
+    let mut b = Aabb::EMPTY;
+    for p in patches {
+        let (lo, hi) = p.frame.world_bounds();
+        b.add(lo);
+        b.add(hi);
+    }
+    b
+}
+
+/// The cells whose patches reach cell `c`'s points, ascending.
+fn sources(store: &Store, reach: &[CellReach], c: usize) -> Vec<usize> {
+    let b = &store.manifest.cells[c].bounds;
+    (0..reach.len())
+        .filter(|&o| !reach[o].reach.is_empty() && reach[o].reach.meets(b))
+        .collect()
+}
+
+/// A cache of decoded patch files.
+struct PatchFiles {
+    dir: PathBuf,
+    lru: Lru<usize, Arc<Vec<Patch>>>,
+}
+
+impl PatchFiles {
+    fn get(&mut self, i: usize) -> Result<Arc<Vec<Patch>>> {
+        if let Some(c) = self.lru.get(&i) {
+            return Ok(Arc::clone(c));
+        }
+        let p = Arc::new(read_patches(&patch_path(&self.dir, i))?);
+        let bytes: usize = p.iter().map(|q| q.heap_bytes()).sum();
+        self.lru.insert(i, Arc::clone(&p), bytes as u64);
+        Ok(p)
+    }
+}
+
+/// Positions as double when float32 would lose more than 2^-20 of the diagonal.
+pub fn needs_double(bounds: &Aabb) -> bool {
+    let m = (0..3)
+        .map(|k| bounds.min[k].abs().max(bounds.max[k].abs()))
+        .fold(0f64, f64::max);
+    m * f32::EPSILON as f64 > bounds.diagonal() * crate::types::FLOAT32_SPACING
+}
+
+/// One wave of pass 2: its cells, their batches and the patches around each.
+struct Wave {
+    cells: Vec<usize>,
+    batches: Vec<Arc<PointBatch>>,
+    around: Vec<(Vec<Arc<Vec<Patch>>>, Vec<usize>)>,
+}
+
+/// Load pass 2's wave `i..j`.
+fn load_wave(
+    cells: &mut Cells<'_>,
+    files: &mut PatchFiles,
+    reach: &[CellReach],
+    i: usize,
+    j: usize,
+) -> Result<Wave> {
+    let mut w = Wave {
+        cells: (i..j).collect(),
+        batches: Vec::new(),
+        around: Vec::new(),
+    };
+    for c in i..j {
+        w.batches.push(cells.get(c)?);
+        let src = sources(cells.store, reach, c);
+        let mut sets = Vec::with_capacity(src.len());
+        for &s in &src {
+            sets.push(files.get(s)?);
+        }
+        w.around.push((sets, src));
+    }
+    Ok(w)
+}
+
+/// The patches of `sets` as one list (source cells ascending, then patch order) and, for
+/// `own`, the indices of that cell's patches in it.
+fn flatten<'a>(
+    sets: &'a [Arc<Vec<Patch>>],
+    src: &[usize],
+    own: usize,
+) -> (Vec<&'a Patch>, Vec<u32>) {
+    let mut all = Vec::new();
+    let mut mine = Vec::new();
+    for (set, &s) in sets.iter().zip(src) {
+        for p in set.iter() {
+            if s == own {
+                mine.push(all.len() as u32);
+            }
+            all.push(p);
+        }
+    }
+    (all, mine)
+}
+
+/// The caches pass 2 reads through, charged to the budget.
+fn pass2_caches<'a>(
+    store: &'a Store,
+    params: &SpectralParams,
+    ctx: &Ctx,
+) -> Result<(Cells<'a>, PatchFiles, [crate::exec::budget::Permit; 2])> {
+    let cap = ctx
+        .budget
+        .share(Share::NormalsCellCache)
+        .max(MIN_CACHE_BYTES);
+    let permits = [
+        ctx.budget
+            .acquire(cap, "the cell cache of spectral blending")?,
+        ctx.budget
+            .acquire(cap, "the patch cache of spectral blending")?,
+    ];
+    Ok((
+        Cells {
+            store,
+            lru: Lru::new(cap),
+        },
+        PatchFiles {
+            dir: params.work_dir.join(PATCHES_DIR),
+            lru: Lru::new(cap),
+        },
+        permits,
+    ))
+}
+
+/// The attributes a filtered point file carries: the store's, less the scan index, with
+/// normals.
+fn out_attrs(a: Attributes) -> Attributes {
+    Attributes {
+        normal: true,
+        source: false,
+        ..a
+    }
+}
+
+/// Filter every point of `store` by `filter` and write them to `output` (a point PLY);
+/// `scalar` adds each point's Parseval error (its heaviest patch's) as `parseval_error`.
+pub fn filter(
+    store: &Store,
+    output: &Path,
+    filter: crate::spectral::filter::Filter,
+    scalar: bool,
+    params: &SpectralParams,
+    ctx: &Ctx,
+) -> Result<SpectralStats> {
+    check_store(store)?;
+    let mut st = SpectralStats {
+        points_in: store.manifest.point_count,
+        cells: store.manifest.cells.len(),
+        diagonal: store.manifest.bounds.diagonal(),
+        ..Default::default()
+    };
+    let mut sums = Sums::default();
+    let reach = pass1(
+        store,
+        &Treatment::Filter(filter),
+        params,
+        ctx,
+        &mut st,
+        &mut sums,
+        |_, _, _| Ok(()),
+        &|_, _, _| {},
+    )?;
+    sums.into_stats(&mut st);
+    let t0 = Instant::now();
+    let (mut cells, mut files, _permits) = pass2_caches(store, params, ctx)?;
+    let opts = PointFileOptions {
+        double: needs_double(&store.manifest.bounds),
+        scalar: scalar.then(|| "parseval_error".to_string()),
+    };
+    let mut out =
+        PointPlyWriter::create_with(output, st.points_in, out_attrs(store.layout.attrs), opts)?;
+    let stage = ctx.progress.stage("blend", Some(st.points_in), "points");
+    let share = ctx.budget.share(Share::NormalsWave);
+    let n = store.manifest.cells.len();
+    let mut i = 0;
+    while i < n {
+        let (j, bytes) = next_wave(store, i, ctx.threads(), share, PASS2_BYTES_PER_POINT);
+        let _permit = ctx
+            .budget
+            .acquire(bytes, "a wave of spectral blending cells")?;
+        let wave = load_wave(&mut cells, &mut files, &reach, i, j)?;
+        let done: Vec<(PointBatch, Vec<f32>, cell::BlendStats)> = ctx.pool.install(|| {
+            wave.cells
+                .par_iter()
+                .zip(wave.batches.par_iter().zip(wave.around.par_iter()))
+                .map(|(&c, (b, (sets, src)))| {
+                    let (all, _) = flatten(sets, src, c);
+                    let around = Around::new(all);
+                    let mut out = PointBatch::clone(b);
+                    out.source.clear();
+                    let mut heaviest = Vec::new();
+                    let bs =
+                        cell::blend_cell(&around, &mut out.pos, &mut out.normal, &mut heaviest);
+                    let sc: Vec<f32> = heaviest
+                        .iter()
+                        .map(|&h| {
+                            around
+                                .patches
+                                .get(h as usize)
+                                .map_or(0.0, |p| p.parseval_rms)
+                        })
+                        .collect();
+                    (out, sc, bs)
+                })
+                .collect()
+        });
+        for (b, sc, bs) in done {
+            out.write_with(&b, Some(&sc))?;
+            st.normal_fallback += bs.fallback;
+            st.unblended += bs.unblended;
+            stage.inc(b.len() as u64);
+        }
+        i = j;
+    }
+    stage.finish(None);
+    out.finish()?;
+    st.points_out = st.points_in;
+    st.secs_blend = t0.elapsed().as_secs_f64();
+    Ok(st)
+}
+
+/// Options of [`resample`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ResampleParams {
+    /// Largest change of the surface, relative to the bounding-box diagonal.
+    pub max_error: f64,
+    /// About this many points instead of the rate the error bound gives.
+    pub points: Option<u64>,
+    /// Least band a patch keeps, relative to its grid's Nyquist frequency.
+    pub min_band: f64,
+}
+
+/// Resample the surface of `store`'s points within `rp.max_error` (§6) and write the new
+/// points to `output`.
+pub fn resample(
+    store: &Store,
+    output: &Path,
+    rp: &ResampleParams,
+    params: &SpectralParams,
+    ctx: &Ctx,
+) -> Result<SpectralStats> {
+    check_store(store)?;
+    let mut st = SpectralStats {
+        points_in: store.manifest.point_count,
+        cells: store.manifest.cells.len(),
+        diagonal: store.manifest.bounds.diagonal(),
+        ..Default::default()
+    };
+    let treat = Treatment::BandLimit {
+        max_err: rp.max_error * st.diagonal,
+        min_band: rp.min_band,
+    };
+    let mut sums = Sums::default();
+    // Expected points at the patches' own rates: rate times the area their members stand for.
+    let mut expected = 0f64;
+    let reach = pass1(
+        store,
+        &treat,
+        params,
+        ctx,
+        &mut st,
+        &mut sums,
+        |_, _, _| Ok(()),
+        &|_, _, _| {},
+    )?;
+    sums.into_stats(&mut st);
+    let t0 = Instant::now();
+    let (mut cells, mut files, _permits) = pass2_caches(store, params, ctx)?;
+    let n = store.manifest.cells.len();
+    if rp.points.is_some() {
+        for c in 0..n {
+            for p in files.get(c)?.iter() {
+                let b = p.frame.bx;
+                let area =
+                    (b[2] - b[0]) * (b[3] - b[1]) * p.members as f64 / p.admitted.max(1) as f64;
+                expected += p.rate as f64 * area;
+            }
+        }
+    }
+    let scale = match rp.points {
+        Some(target) if expected > 0.0 => target as f64 / expected,
+        _ => 1.0,
+    };
+    // The count is known only at the end: points go to a spill file first.
+    let spill = params.work_dir.join(RESAMPLED);
+    let mut spill_w = std::io::BufWriter::new(std::fs::File::create(&spill).with_path(&spill)?);
+    let stage = ctx.progress.stage("resample", Some(st.points_in), "points");
+    let share = ctx.budget.share(Share::NormalsWave);
+    let mut i = 0;
+    let mut count = 0u64;
+    while i < n {
+        let (j, bytes) = next_wave(store, i, ctx.threads(), share, PASS2_BYTES_PER_POINT);
+        let _permit = ctx.budget.acquire(bytes, "a wave of resampled cells")?;
+        let wave = load_wave(&mut cells, &mut files, &reach, i, j)?;
+        let done: Vec<(Vec<[f64; 3]>, Vec<[f32; 3]>, u64)> = ctx.pool.install(|| {
+            wave.cells
+                .par_iter()
+                .zip(wave.around.par_iter())
+                .map(|(&c, (sets, src))| {
+                    let (all, mine) = flatten(sets, src, c);
+                    let around = Around::new(all);
+                    let (mut p, mut nn) = (Vec::new(), Vec::new());
+                    let fb = cell::resample_cell(&around, &mine, scale, &mut p, &mut nn);
+                    (p, nn, fb)
+                })
+                .collect()
+        });
+        for (p, nn, fb) in done {
+            use std::io::Write;
+            let mut buf = Vec::with_capacity(p.len() * 36);
+            for (a, b) in p.iter().zip(&nn) {
+                a.iter()
+                    .for_each(|x| buf.extend_from_slice(&x.to_le_bytes()));
+                b.iter()
+                    .for_each(|x| buf.extend_from_slice(&x.to_le_bytes()));
+            }
+            spill_w.write_all(&buf).with_path(&spill)?;
+            count += p.len() as u64;
+            st.normal_fallback += fb;
+        }
+        stage.inc(store.manifest.cells[i..j].iter().map(|e| e.count).sum());
+        i = j;
+    }
+    stage.finish(None);
+    drop(spill_w);
+    write_spill(&spill, count, output, &store.manifest.bounds)?;
+    std::fs::remove_file(&spill).with_path(&spill)?;
+    st.points_out = count;
+    st.secs_blend = t0.elapsed().as_secs_f64();
+    Ok(st)
+}
+
+/// Copy `count` spilled points (position f64 ×3, normal f32 ×3) into a point PLY.
+fn write_spill(spill: &Path, count: u64, output: &Path, bounds: &Aabb) -> Result<()> {
+    use std::io::Read;
+    let opts = PointFileOptions {
+        double: needs_double(bounds),
+        scalar: None,
+    };
+    let attrs = Attributes {
+        normal: true,
+        ..Attributes::default()
+    };
+    let mut out = PointPlyWriter::create_with(output, count, attrs, opts)?;
+    let mut r = std::io::BufReader::new(std::fs::File::open(spill).with_path(spill)?);
+    let mut rec = [0u8; 36];
+    let mut b = PointBatch::default();
+    let mut left = count;
+    while left > 0 {
+        b.clear();
+        while left > 0 && b.pos.len() < 1 << 16 {
+            r.read_exact(&mut rec).with_path(spill)?;
+            let f =
+                |k: usize| f64::from_le_bytes(rec[k * 8..k * 8 + 8].try_into().unwrap_or([0; 8]));
+            let g = |k: usize| {
+                f32::from_le_bytes(rec[24 + k * 4..28 + k * 4].try_into().unwrap_or([0; 4]))
+            };
+            b.pos.push([f(0), f(1), f(2)]);
+            b.normal.push([g(0), g(1), g(2)]);
+            left -= 1;
+        }
+        out.write(&b)?;
+    }
+    out.finish()
+}
+
+/// Radial band edges of `spectrum`'s energy summary, relative to the Nyquist frequency.
+pub const BAND_EDGES: [f64; 6] = [0.0, 0.125, 0.25, 0.5, 0.75, 1.5];
+
+/// Least side of a spectrum image, pixels (small grids are enlarged).
+const IMAGE_SIDE: usize = 128;
+
+/// What `spectrum` wrote besides its statistics.
+#[derive(Debug, Clone, Default, serde::Serialize)]
+pub struct SpectrumReport {
+    /// The layout and height-field statistics.
+    pub stats: SpectralStats,
+    /// Band edges of `band_energy`.
+    pub band_edges: Vec<f64>,
+    /// Share of the height fields' energy (their mean plane removed) in each band, over all
+    /// patches.
+    pub band_energy: Vec<f64>,
+    /// The power-spectrum images written, with their patches.
+    pub images: Vec<SpectrumImage>,
+}
+
+/// One power-spectrum image.
+#[derive(Debug, Clone, Default, serde::Serialize)]
+pub struct SpectrumImage {
+    /// File name inside the output directory.
+    pub file: String,
+    /// Global patch number (as in the layout file).
+    pub patch: u64,
+    /// Store cell and patch within it.
+    pub cell: usize,
+    /// Grid size.
+    pub grid: [u32; 2],
+    /// Members.
+    pub members: u32,
+}
+
+/// Analyse `store`'s patches: write `dir/layout.ply` (every point with its patch's number
+/// and a colour for it), power-spectrum images (`dir/spectrum-*.png`) of the first patch of
+/// `images` cells spread evenly over the store, and `dir/summary.json`.
+pub fn spectrum(
+    store: &Store,
+    dir: &Path,
+    images: usize,
+    params: &SpectralParams,
+    ctx: &Ctx,
+) -> Result<SpectrumReport> {
+    use std::sync::Mutex;
+    check_store(store)?;
+    let n = store.manifest.cells.len();
+    let chosen = chosen_patches(store, images, params.layout.patch_max);
+    let mut st = SpectralStats {
+        points_in: store.manifest.point_count,
+        cells: n,
+        diagonal: store.manifest.bounds.diagonal(),
+        ..Default::default()
+    };
+    let staging = atomic::TempDir::create(dir)?;
+    let opts = PointFileOptions {
+        double: needs_double(&store.manifest.bounds),
+        scalar: Some("patch".to_string()),
+    };
+    let attrs = Attributes {
+        normal: true,
+        color: true,
+        ..Attributes::default()
+    };
+    let mut layout_ply = PointPlyWriter::create_with(
+        &staging.path().join("layout.ply"),
+        st.points_in,
+        attrs,
+        opts,
+    )?;
+    let energies: Mutex<Vec<(usize, usize, Vec<f64>)>> = Mutex::new(Vec::new());
+    let pictures: Mutex<Vec<(usize, usize, Vec<u8>, [u32; 2])>> = Mutex::new(Vec::new());
+    let raw = |c: usize, k: usize, w: &mut PatchWork| {
+        let g = &w.raw;
+        let e = crate::spectral::filter::band_energy(
+            &g.h,
+            g.nu,
+            g.nv,
+            &BAND_EDGES,
+            &mut w.fft,
+            &mut w.filt,
+        );
+        if let Ok(mut v) = energies.lock() {
+            v.push((c, k, e));
+        }
+        if chosen.contains(&(c, k)) {
+            let img = power_png(&w.raw.clone(), &mut w.fft);
+            if let Ok(mut v) = pictures.lock() {
+                v.push((c, k, img, [g.nu as u32, g.nv as u32]));
+            }
+        }
+    };
+    let mut sums = Sums::default();
+    let mut next_id = 0u64;
+    let mut first_of_cell = vec![0u64; n];
+    let mut members_of: std::collections::BTreeMap<(usize, usize), u32> = Default::default();
+    let quiet = SpectralParams {
+        resume: false,
+        ..params.clone()
+    };
+    pass1(
+        store,
+        &Treatment::Keep,
+        &quiet,
+        ctx,
+        &mut st,
+        &mut sums,
+        |c, b, f| {
+            first_of_cell[c] = next_id;
+            for &(cc, k) in chosen.iter().filter(|x| x.0 == c) {
+                members_of.insert((cc, k), f.patches.get(k).map_or(0, |p| p.members));
+            }
+            let mut out = PointBatch {
+                pos: b.pos.clone(),
+                normal: b.normal.clone(),
+                ..Default::default()
+            };
+            let ids: Vec<f32> = f
+                .patch_of
+                .iter()
+                .map(|&k| {
+                    if k == u32::MAX {
+                        -1.0
+                    } else {
+                        (next_id + k as u64) as f32
+                    }
+                })
+                .collect();
+            out.color = f
+                .patch_of
+                .iter()
+                .map(|&k| {
+                    if k == u32::MAX {
+                        [32768; 4]
+                    } else {
+                        patch_colour(next_id + k as u64)
+                    }
+                })
+                .collect();
+            next_id += f.patches.len() as u64;
+            layout_ply.write_with(&out, Some(&ids))
+        },
+        &raw,
+    )?;
+    layout_ply.finish()?;
+    sums.into_stats(&mut st);
+    st.points_out = st.points_in;
+    let mut e = energies.into_inner().unwrap_or_default();
+    e.sort_by_key(|x| (x.0, x.1));
+    let mut band = vec![0f64; BAND_EDGES.len() - 1];
+    for (_, _, v) in &e {
+        for (b, x) in band.iter_mut().zip(v) {
+            *b += x;
+        }
+    }
+    let total: f64 = band.iter().sum();
+    if total > 0.0 {
+        band.iter_mut().for_each(|b| *b /= total);
+    }
+    let mut pics = pictures.into_inner().unwrap_or_default();
+    pics.sort_by_key(|p| (p.0, p.1));
+    let mut report = SpectrumReport {
+        stats: st,
+        band_edges: BAND_EDGES.to_vec(),
+        band_energy: band,
+        images: Vec::new(),
+    };
+    for (c, k, png, grid) in pics {
+        let id = first_of_cell[c] + k as u64;
+        let file = format!("spectrum-{id:06}.png");
+        atomic::write(&staging.path().join(&file), &png, Durability::Renamed)?;
+        report.images.push(SpectrumImage {
+            file,
+            patch: id,
+            cell: c,
+            grid,
+            members: members_of.get(&(c, k)).copied().unwrap_or(0),
+        });
+    }
+    let json = serde_json::to_string_pretty(&report)
+        .map_err(|e| Error::Internal(format!("summary.json: {e}")))?;
+    atomic::write(
+        &staging.path().join("summary.json"),
+        json.as_bytes(),
+        Durability::Renamed,
+    )?;
+    staging.commit(dir)?;
+    Ok(report)
+}
+
+/// The patches (cell, patch in cell) whose spectra `spectrum` draws: `images` of them spread
+/// over the cells in Morton order and over the patches within a cell (a cell's patch count is
+/// estimated from its points and the largest patch size).
+fn chosen_patches(store: &Store, images: usize, patch_max: usize) -> Vec<(usize, usize)> {
+    let cells = &store.manifest.cells;
+    let n = cells.len();
+    if images == 0 || n == 0 {
+        return Vec::new();
+    }
+    let per = images.div_ceil(n);
+    let mut out = Vec::new();
+    for i in 0..images.min(n) {
+        let c = i * n / images.min(n);
+        let stride = (cells[c].count as usize / patch_max.max(1) / per).max(1);
+        out.extend((0..per).map(|j| (c, j * stride)));
+    }
+    out.truncate(images);
+    out
+}
+
+/// A colour for patch `id`, far from its neighbours' (golden-ratio hues).
+fn patch_colour(id: u64) -> [u16; 4] {
+    let h = (id as f64 * 0.618_033_988_75).fract() * 6.0;
+    let x = 1.0 - (h % 2.0 - 1.0).abs();
+    let (r, g, b) = match h as u32 {
+        0 => (1.0, x, 0.0),
+        1 => (x, 1.0, 0.0),
+        2 => (0.0, 1.0, x),
+        3 => (0.0, x, 1.0),
+        4 => (x, 0.0, 1.0),
+        _ => (1.0, 0.0, x),
+    };
+    let c = |v: f64| (40000.0 * v + 20000.0) as u16;
+    [c(r), c(g), c(b), 65535]
+}
+
+/// The log power spectrum of a grid's heights (mean removed), DC at the centre, as an 8-bit
+/// grey PNG spanning six decades below its peak.
+fn power_png(g: &crate::spectral::sda::Grid, fft: &mut crate::spectral::fft::Fft2) -> Vec<u8> {
+    let mean = g.h.iter().sum::<f64>() / g.h.len().max(1) as f64;
+    let h: Vec<f64> = g.h.iter().map(|x| x - mean).collect();
+    let mut s = crate::spectral::fft::Spectrum::default();
+    fft.forward(&h, g.nu, g.nv, &mut s);
+    let p = s.power_image();
+    let top = p.iter().copied().fold(0f64, f64::max).max(1e-300);
+    let scale = (IMAGE_SIDE / g.nu.min(g.nv).max(1)).max(1);
+    let (w, hh) = (g.nu * scale, g.nv * scale);
+    let mut px = vec![0u8; w * hh];
+    for y in 0..hh {
+        for x in 0..w {
+            let v = p[(y / scale) * g.nu + x / scale].max(top * 1e-6);
+            px[y * w + x] = (255.0 * (1.0 + (v / top).log10() / 6.0))
+                .round()
+                .clamp(0.0, 255.0) as u8;
+        }
+    }
+    let mut out = Vec::new();
+    {
+        let mut e = png::Encoder::new(&mut out, w as u32, hh as u32);
+        e.set_color(png::ColorType::Grayscale);
+        e.set_depth(png::BitDepth::Eight);
+        if let Ok(mut wr) = e.write_header() {
+            let _ = wr.write_image_data(&px);
+        }
+    }
+    out
+}

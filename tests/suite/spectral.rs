@@ -1,0 +1,450 @@
+//! `filter`, `resample` and `spectrum`: accuracy against exact surfaces, the error bound, the
+//! same bytes for any thread count and cell layout, resume, outputs and bad options.
+
+use std::path::Path;
+
+use scanflow::synth::Truth;
+use scanflow::types::PointBatch;
+
+use super::common::*;
+
+/// Read every point of a point file.
+fn load(path: &Path) -> PointBatch {
+    let r = scanflow::io::open(path).unwrap();
+    let mut b = PointBatch::default();
+    for c in r.chunks(1 << 16).unwrap() {
+        r.read_chunk(&c, false, &mut b).unwrap();
+    }
+    b
+}
+
+/// RMS and largest distance of the points of `path` to the exact surface, relative to its
+/// bounding-box diagonal.
+fn to_truth(path: &Path, truth: &Truth) -> (f64, f64) {
+    let b = load(path);
+    let diag = truth.bounding_box().diagonal();
+    let (mut s, mut m) = (0.0, 0f64);
+    for p in &b.pos {
+        let d = truth.distance(*p).abs();
+        s += d * d;
+        m = m.max(d);
+    }
+    ((s / b.pos.len() as f64).sqrt() / diag, m / diag)
+}
+
+/// Synthesise `shape` with `n` points and `noise`; returns the point file and its truth.
+fn synth(dir: &Path, shape: &str, n: u64, noise: f64) -> (std::path::PathBuf, Truth) {
+    let ply = dir.join(format!("{shape}.ply"));
+    ok(&[
+        "synth",
+        shape,
+        "--points",
+        &n.to_string(),
+        "--noise",
+        &noise.to_string(),
+        "-o",
+        s(&ply),
+        "--progress",
+        "none",
+    ]);
+    let truth = Truth::load(&dir.join(format!("{shape}.truth.json"))).unwrap();
+    (ply, truth)
+}
+
+#[test]
+fn wiener_and_lowpass_bring_noisy_points_closer_to_the_surface() {
+    let d = tempfile::tempdir().unwrap();
+    for shape in ["sphere", "bumpy"] {
+        let (ply, truth) = synth(d.path(), shape, 60_000, 0.004);
+        let (raw, _) = to_truth(&ply, &truth);
+        for (name, args) in [
+            ("wiener", vec!["--wiener"]),
+            ("lowpass", vec!["--lowpass", "gauss:0.3"]),
+        ] {
+            let out = d.path().join(format!("{shape}_{name}.ply"));
+            let mut a = vec!["filter", s(&ply), "-o", s(&out), "--progress", "none"];
+            a.extend(args);
+            let text = ok(&a);
+            assert!(text.contains("Parseval error"), "{text}");
+            let (rms, _) = to_truth(&out, &truth);
+            assert!(
+                rms < 0.6 * raw,
+                "{shape} {name}: RMS to the surface {rms:.3e} against {raw:.3e} before"
+            );
+        }
+    }
+}
+
+#[test]
+fn resample_stays_within_the_error_bound_and_follows_the_detail() {
+    let d = tempfile::tempdir().unwrap();
+    let (ply, truth) = synth(d.path(), "bumpy", 80_000, 0.0);
+    let out = d.path().join("r.ply");
+    let e = 5e-4;
+    ok(&[
+        "resample",
+        s(&ply),
+        "-o",
+        s(&out),
+        "--max-error",
+        &e.to_string(),
+        "--progress",
+        "none",
+    ]);
+    let (rms, max) = to_truth(&out, &truth);
+    assert!(
+        max < e,
+        "largest distance {max:.3e} over the bound {e} (RMS {rms:.3e})"
+    );
+    // Fewer points where the surface is flat than where it is bumpy. The relief
+    // `sin(k x) sin(k y) sin(k z)` is nearly flat near the coordinate axes (two of the three
+    // factors near zero) and bumpiest away from them: compare the share of the input's
+    // points kept in each region.
+    let r = load(&out);
+    let input = load(&ply);
+    let region = |p: &[f64; 3]| {
+        let n = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
+        let m = p.iter().map(|x| (x / n).abs()).fold(0f64, f64::max);
+        if m > 0.97 {
+            Some(0)
+        } else if m < 0.7 {
+            Some(1)
+        } else {
+            None
+        }
+    };
+    let (mut inp, mut outp) = ([0f64; 2], [0f64; 2]);
+    input
+        .pos
+        .iter()
+        .filter_map(region)
+        .for_each(|k| inp[k] += 1.0);
+    r.pos.iter().filter_map(region).for_each(|k| outp[k] += 1.0);
+    let (flat, bumpy) = (outp[0] / inp[0], outp[1] / inp[1]);
+    eprintln!(
+        "{} of {} points; kept {flat:.3} of the input's density where flat, {bumpy:.3} where bumpy; RMS {rms:.3e}, max {max:.3e}",
+        r.pos.len(),
+        input.pos.len()
+    );
+    assert!(r.pos.len() < input.pos.len());
+    assert!(flat < 0.8 * bumpy, "flat {flat:.3}, bumpy {bumpy:.3}");
+}
+
+#[test]
+fn filter_gives_the_same_bytes_for_any_thread_count() {
+    let d = tempfile::tempdir().unwrap();
+    let (ply, _) = synth(d.path(), "torus", 40_000, 0.003);
+    let store = d.path().join("store");
+    // Small cells: patches reach across cell faces through the halo.
+    ok(&[
+        "ingest",
+        s(&ply),
+        "-o",
+        s(&store),
+        "--max-cell-points",
+        "6000",
+        "--progress",
+        "none",
+    ]);
+    let mut outs = Vec::new();
+    for t in ["1", "2", "3"] {
+        let out = d.path().join(format!("f{t}.ply"));
+        ok(&[
+            "filter",
+            s(&store),
+            "-o",
+            s(&out),
+            "--wiener",
+            "--write-parseval",
+            "--threads",
+            t,
+            "--progress",
+            "none",
+        ]);
+        outs.push(std::fs::read(&out).unwrap());
+    }
+    assert!(
+        outs[0] == outs[1] && outs[1] == outs[2],
+        "bytes differ with --threads"
+    );
+    // And resampling.
+    let mut rs = Vec::new();
+    for t in ["1", "2"] {
+        let out = d.path().join(format!("r{t}.ply"));
+        ok(&[
+            "resample",
+            s(&store),
+            "-o",
+            s(&out),
+            "--threads",
+            t,
+            "--progress",
+            "none",
+        ]);
+        rs.push(std::fs::read(&out).unwrap());
+    }
+    assert!(rs[0] == rs[1], "resampled bytes differ with --threads");
+}
+
+#[test]
+fn blending_hides_cell_boundaries() {
+    // The same points filtered as one cell and as many: the filtered surfaces agree to a
+    // small fraction of the noise, so cell faces leave no seam.
+    let d = tempfile::tempdir().unwrap();
+    let (ply, truth) = synth(d.path(), "sphere", 40_000, 0.004);
+    let (raw, _) = to_truth(&ply, &truth);
+    let mut rms = Vec::new();
+    for cells in ["1000000", "5000"] {
+        let store = d.path().join(format!("store{cells}"));
+        ok(&[
+            "ingest",
+            s(&ply),
+            "-o",
+            s(&store),
+            "--max-cell-points",
+            cells,
+            "--progress",
+            "none",
+        ]);
+        let out = d.path().join(format!("f{cells}.ply"));
+        ok(&[
+            "filter",
+            s(&store),
+            "-o",
+            s(&out),
+            "--lowpass",
+            "gauss:0.3",
+            "--progress",
+            "none",
+        ]);
+        rms.push(to_truth(&out, &truth));
+    }
+    let (one, many) = (rms[0], rms[1]);
+    assert!(
+        many.0 < 1.15 * one.0 && many.0 < 0.6 * raw,
+        "one cell {one:?}, many cells {many:?}, raw {raw:.3e}"
+    );
+}
+
+#[test]
+fn parseval_scalar_and_attributes_are_written() {
+    let d = tempfile::tempdir().unwrap();
+    let (ply, _) = synth(d.path(), "sphere", 20_000, 0.003);
+    let out = d.path().join("f.ply");
+    ok(&[
+        "filter",
+        s(&ply),
+        "-o",
+        s(&out),
+        "--lowpass",
+        "ideal:0.5",
+        "--write-parseval",
+        "--progress",
+        "none",
+    ]);
+    let bytes = std::fs::read(&out).unwrap();
+    let head = String::from_utf8_lossy(&bytes[..400.min(bytes.len())]).to_string();
+    assert!(head.contains("element vertex 20000"), "{head}");
+    assert!(head.contains("property float nx"), "{head}");
+    assert!(head.contains("property float parseval_error"), "{head}");
+    if has_plyfile() {
+        let o = std::process::Command::new("python3")
+            .args([
+                "-c",
+                "import sys, plyfile; v = plyfile.PlyData.read(sys.argv[1])['vertex']; \
+                 e = v['parseval_error']; print(len(v), float(e.min()), float(e.max()))",
+                s(&out),
+            ])
+            .output()
+            .unwrap();
+        let t = String::from_utf8_lossy(&o.stdout);
+        let f: Vec<f64> = t.split_whitespace().map(|x| x.parse().unwrap()).collect();
+        assert_eq!(f[0], 20000.0, "{t}");
+        assert!(f[1] >= 0.0 && f[2] > 0.0, "{t}");
+    }
+}
+
+#[test]
+fn spectrum_writes_layout_images_and_summary() {
+    let d = tempfile::tempdir().unwrap();
+    let (ply, _) = synth(d.path(), "bumpy", 30_000, 0.002);
+    let out = d.path().join("spec");
+    let text = ok(&[
+        "spectrum",
+        s(&ply),
+        "-o",
+        s(&out),
+        "--images",
+        "3",
+        "--progress",
+        "none",
+    ]);
+    assert!(text.contains("energy by band"), "{text}");
+    let summary: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
+    let patches = summary["stats"]["patches"].as_u64().unwrap();
+    assert!(patches > 10, "{summary}");
+    let energy: f64 = summary["band_energy"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .sum();
+    assert!((energy - 1.0).abs() < 1e-9, "{summary}");
+    let images = summary["images"].as_array().unwrap();
+    assert_eq!(images.len(), 3, "{summary}");
+    for im in images {
+        let png = std::fs::read(out.join(im["file"].as_str().unwrap())).unwrap();
+        assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n");
+    }
+    let layout = load(&out.join("layout.ply"));
+    assert_eq!(layout.pos.len(), 30_000);
+    assert_eq!(layout.color.len(), 30_000);
+    assert!(temp_files(d.path()).is_empty());
+}
+
+#[test]
+fn resume_reuses_the_patches_of_the_same_run_only() {
+    let d = tempfile::tempdir().unwrap();
+    let (ply, _) = synth(d.path(), "sphere", 20_000, 0.003);
+    let work = d.path().join("w");
+    let a = d.path().join("a.ply");
+    ok(&[
+        "filter",
+        s(&ply),
+        "-o",
+        s(&a),
+        "--wiener",
+        "--work-dir",
+        s(&work),
+        "--keep-work",
+        "--progress",
+        "none",
+    ]);
+    let b = d.path().join("b.ply");
+    let text = ok(&[
+        "filter",
+        s(&ply),
+        "-o",
+        s(&b),
+        "--wiener",
+        "--work-dir",
+        s(&work),
+        "--resume",
+        "--progress",
+        "none",
+    ]);
+    assert!(text.contains("reused the patches"), "{text}");
+    assert_eq!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap());
+    assert!(
+        !work.exists(),
+        "the work directory is removed after success"
+    );
+    // Another filter is another run: a resume refuses the work directory.
+    ok(&[
+        "filter",
+        s(&ply),
+        "-o",
+        s(&a),
+        "--wiener",
+        "--work-dir",
+        s(&work),
+        "--keep-work",
+        "--progress",
+        "none",
+    ]);
+    let err = fails(&[
+        "filter",
+        s(&ply),
+        "-o",
+        s(&b),
+        "--lowpass",
+        "gauss:0.3",
+        "--work-dir",
+        s(&work),
+        "--resume",
+        "--progress",
+        "none",
+    ]);
+    assert!(
+        err.contains("cannot resume") && err.contains("filter"),
+        "{err}"
+    );
+}
+
+#[test]
+fn bad_spectral_options_and_inputs_are_refused() {
+    let d = tempfile::tempdir().unwrap();
+    let (ply, _) = synth(d.path(), "sphere", 2_000, 0.0);
+    let out = d.path().join("o.ply");
+    let (p, o) = (s(&ply), s(&out));
+    for (args, want) in [
+        (vec!["filter", p, "-o", o], "no filter"),
+        (
+            vec!["filter", p, "-o", o, "--wiener", "--lowpass", "gauss:0.3"],
+            "one filter",
+        ),
+        (
+            vec!["filter", p, "-o", o, "--lowpass", "gauss:0"],
+            "out of range",
+        ),
+        (
+            vec!["filter", p, "-o", o, "--lowpass", "box:0.3"],
+            "unknown kind",
+        ),
+        (
+            vec!["filter", p, "-o", o, "--lowpass", "gauss:x"],
+            "not a number",
+        ),
+        (
+            vec!["filter", p, "-o", o, "--bandstop", "0.2,0.5,2"],
+            "[0, 1)",
+        ),
+        (
+            vec!["filter", p, "-o", o, "--bandstop", "0.5,0.2,0"],
+            "not below",
+        ),
+        (
+            vec!["filter", p, "-o", o, "--enhance", "0.2,0.5,0.5"],
+            "more than 1",
+        ),
+        (vec!["filter", p, "-o", o, "--enhance", "0.2,0.5"], "A,B,G"),
+        (vec!["filter", p, "-o", o, "--wiener", "-3"], "positive"),
+        (
+            vec!["filter", p, "-o", o, "--wiener", "--patch-size", "5"],
+            "--patch-size",
+        ),
+        (
+            vec!["resample", p, "-o", o, "--max-error", "0"],
+            "--max-error",
+        ),
+        (vec!["resample", p, "-o", o, "--points", "0"], "--points"),
+        (vec!["filter", p, "-o", p, "--wiener"], p),
+        (
+            vec!["spectrum", p, "-o", d.path().to_str().unwrap()],
+            "already exists",
+        ),
+    ] {
+        let mut a = args.clone();
+        a.extend(["--progress", "none"]);
+        let err = usage(&a);
+        assert!(err.contains(want), "{args:?}: {err}");
+    }
+    assert!(!out.exists());
+    // Points without normals where the inputs' normals are required.
+    let bare = d.path().join("bare.xyz");
+    std::fs::write(&bare, "0 0 0\n1 0 0\n0 1 0\n1 1 0.1\n").unwrap();
+    let err = fails(&[
+        "filter",
+        s(&bare),
+        "-o",
+        o,
+        "--wiener",
+        "--normals",
+        "use",
+        "--progress",
+        "none",
+    ]);
+    assert!(err.contains("bare.xyz"), "{err}");
+    assert!(!out.exists() && temp_files(d.path()).is_empty());
+}
