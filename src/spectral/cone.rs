@@ -60,6 +60,13 @@ pub struct ConeWorkspace {
     pts: Vec<[f64; 3]>,
 }
 
+impl ConeWorkspace {
+    /// The number of normals (non-zero, finite) the last call of [`enclosing_cone_with`] used.
+    pub fn used(&self) -> usize {
+        self.pts.len()
+    }
+}
+
 /// Smallest cap containing every normal `normals[i]` for `i` in `idx` (zero normals skipped).
 /// `None` when the normals are not within an open hemisphere (no cap of half angle `< π/2`),
 /// or `idx` has no non-zero normal. Allocates a workspace; see [`enclosing_cone_with`].
