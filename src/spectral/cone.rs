@@ -486,4 +486,21 @@ mod tests {
             }
         }
     }
+
+    /// Throughput on patch-sized sets (run with `--ignored --nocapture`).
+    #[test]
+    #[ignore]
+    fn enclosing_cone_speed_on_patches() {
+        let mut rng = Pcg64::seed_from_u64(17);
+        let normals = cluster(&mut rng, 200_000, 0.7);
+        let mut ws = ConeWorkspace::default();
+        let idx: Vec<u32> = (0..200_000).collect();
+        let t = std::time::Instant::now();
+        let mut sum = 0.0;
+        for chunk in idx.chunks(1000) {
+            sum += enclosing_cone_with(&mut ws, &normals, chunk).map_or(0.0, |c| c.half_angle);
+        }
+        let ns = t.elapsed().as_nanos() as f64 / 200_000.0;
+        println!("enclosing_cone: {ns:.1} ns/normal on 1000-normal sets (sum {sum:.3})");
+    }
 }

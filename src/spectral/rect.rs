@@ -6,7 +6,9 @@
 //!
 //! A smallest-area enclosing rectangle has a side collinear with an edge of the convex hull
 //! (Freeman & Shapira 1975). So: build the hull (Andrew's monotone chain, counter-clockwise,
-//! collinear points dropped), then for each hull edge direction `e` measure the extents of the
+//! collinear points dropped, after discarding the points strictly inside the octagon of the
+//! extremes along ±x, ±y, ±(x+y), ±(x−y): Akl & Toussaint's throw-away step, which leaves a
+//! small fraction of a patch's points to sort), then for each hull edge direction `e` measure the extents of the
 //! hull along `e` and along `perp(e) = (-e.y, e.x)`. Rotating calipers (Toussaint 1983) keep
 //! the three extreme vertices (furthest along `e`, along `perp(e)`, and against `e`) as
 //! pointers that only advance as the edge turns counter-clockwise, so all edges cost `O(h)`
@@ -161,7 +163,8 @@ fn frame_rect(h: &[[f64; 2]], dir: [f64; 2]) -> Rect {
 /// collinear and repeated points dropped.
 fn convex_hull(pts: &[[f64; 2]], sorted: &mut Vec<[f64; 2]>, hull: &mut Vec<[f64; 2]>) {
     sorted.clear();
-    sorted.extend_from_slice(pts);
+    let octagon = extremes(pts);
+    sorted.extend(pts.iter().filter(|&&p| !strictly_inside(&octagon, p)));
     sorted.sort_unstable_by(|a, b| a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])));
     sorted.dedup();
     hull.clear();
@@ -183,6 +186,51 @@ fn convex_hull(pts: &[[f64; 2]], sorted: &mut Vec<[f64; 2]>, hull: &mut Vec<[f64
         hull.push(p);
     }
     hull.pop();
+}
+
+/// The points extreme along ±x, ±y, ±(x+y), ±(x-y), counter-clockwise from the lowest: a
+/// convex polygon inside the hull (Akl & Toussaint 1978), possibly with repeated corners.
+fn extremes(pts: &[[f64; 2]]) -> [[f64; 2]; 8] {
+    let Some(&first) = pts.first() else {
+        return [[0.0; 2]; 8];
+    };
+    let dirs: [[f64; 2]; 8] = [
+        [0.0, -1.0],
+        [1.0, -1.0],
+        [1.0, 0.0],
+        [1.0, 1.0],
+        [0.0, 1.0],
+        [-1.0, 1.0],
+        [-1.0, 0.0],
+        [-1.0, -1.0],
+    ];
+    let mut best = [(f64::NEG_INFINITY, first); 8];
+    for &p in pts {
+        for (b, d) in best.iter_mut().zip(dirs) {
+            let v = dot(p, d);
+            if v > b.0 {
+                *b = (v, p);
+            }
+        }
+    }
+    best.map(|b| b.1)
+}
+
+/// Whether `p` lies strictly inside the convex polygon `poly` (counter-clockwise, repeated
+/// corners allowed); `false` for a polygon of under three distinct corners.
+fn strictly_inside(poly: &[[f64; 2]; 8], p: [f64; 2]) -> bool {
+    let mut edges = 0;
+    for k in 0..8 {
+        let (a, b) = (poly[k], poly[(k + 1) % 8]);
+        if a == b {
+            continue;
+        }
+        if turn(a, b, p) <= 0.0 {
+            return false;
+        }
+        edges += 1;
+    }
+    edges >= 3
 }
 
 /// Twice the signed area of `a, b, c`: positive for a counter-clockwise turn.
@@ -341,5 +389,21 @@ mod tests {
         let r = min_area_rect(&p);
         assert!((r.area() - 19.0 * 6.0).abs() < 1e-9);
         assert!((r.axis[0].abs() - c).abs() < 1e-12 && (r.axis[1].abs() - s).abs() < 1e-12);
+    }
+
+    /// Throughput on patch-sized sets (run with `--ignored --nocapture`).
+    #[test]
+    #[ignore]
+    fn min_area_rect_speed_on_patches() {
+        let mut rng = Pcg64::seed_from_u64(3);
+        let sets: Vec<Vec<[f64; 2]>> = (0..200).map(|_| random_set(&mut rng, 1000)).collect();
+        let mut ws = RectWorkspace::default();
+        let t = std::time::Instant::now();
+        let mut area = 0.0;
+        for p in &sets {
+            area += min_area_rect_with(&mut ws, p).area();
+        }
+        let ns = t.elapsed().as_nanos() as f64 / (200.0 * 1000.0);
+        println!("min_area_rect: {ns:.1} ns/point on 1000-point sets (sum of areas {area:.3})");
     }
 }
