@@ -76,7 +76,8 @@ impl Buckets {
 
     #[inline]
     fn coord(&self, x: f64, k: usize) -> usize {
-        (((x - self.lo[k]) / self.s).floor().max(0.0) as usize).min(self.dims[k] - 1)
+        // `as` truncates toward zero and saturates negatives to 0: the floor, clamped.
+        (((x - self.lo[k]) / self.s) as usize).min(self.dims[k] - 1)
     }
 
     /// Bucket ranges `[x0, y0, z0, x1, y1, z1]` (inclusive) a box meets.

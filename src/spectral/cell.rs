@@ -60,7 +60,7 @@ pub fn plan_cell(
     ov: &Overlap,
     work: &mut PatchWork,
 ) -> CellPlan {
-    let seeds = layout::layout(pos, normal, lp);
+    let seeds = layout::layout_with(&mut work.layout, pos, normal, lp);
     let mut lo = [f64::INFINITY; 3];
     let mut hi = [f64::NEG_INFINITY; 3];
     for p in pos {

@@ -192,8 +192,9 @@ pub enum Treatment {
 }
 
 /// Per-thread scratch reused from patch to patch.
-#[derive(Default)]
 pub struct PatchWork {
+    /// The layout's buffers.
+    pub layout: crate::spectral::layout::Workspace,
     uv: Vec<[f64; 2]>,
     sda: SdaWork,
     /// The FFT plans and scratch.
@@ -204,6 +205,21 @@ pub struct PatchWork {
     tmp: Vec<f64>,
     /// The grid of the last patch built, before filtering (for spectra of chosen patches).
     pub raw: Grid,
+}
+
+impl Default for PatchWork {
+    fn default() -> Self {
+        PatchWork {
+            layout: Default::default(),
+            uv: Vec::new(),
+            sda: SdaWork::default(),
+            fft: Fft2::default(),
+            filt: FilterWork::default(),
+            cov: Vec::new(),
+            tmp: Vec::new(),
+            raw: sda::grid_for(1, [0.0; 2], [1.0; 2], 1.0),
+        }
+    }
 }
 
 /// Patches with fewer members than this are too small to approximate: their points pass
@@ -248,7 +264,7 @@ pub fn frame(
     work: &mut PatchWork,
 ) -> Option<Frame> {
     let m = &seed.members;
-    if m.len() < MIN_MEMBERS {
+    if m.len() < MIN_MEMBERS || seed.oriented == 0 {
         return None;
     }
     let n = seed.cone.axis;
@@ -459,8 +475,9 @@ pub fn locate(
 ) -> (usize, usize, f64, f64) {
     let x = ((u - lo[0]) / step).clamp(0.0, (nu - 1) as f64);
     let y = ((v - lo[1]) / step).clamp(0.0, (nv - 1) as f64);
-    let i = (x.floor() as usize).min(nu - 2);
-    let j = (y.floor() as usize).min(nv - 2);
+    // Truncation is the floor of these non-negative values (and no libm call).
+    let i = (x as usize).min(nu - 2);
+    let j = (y as usize).min(nv - 2);
     (i, j, x - i as f64, y - j as f64)
 }
 
@@ -587,6 +604,7 @@ mod tests {
         let members: Vec<u32> = (0..pos.len() as u32).collect();
         let cone = enclosing_cone(&nor, &members).unwrap();
         let seed = PatchSeed {
+            oriented: members.len() as u32,
             members,
             cone: cone.clone(),
         };
