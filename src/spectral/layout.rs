@@ -33,7 +33,7 @@
 //! half-edges that are concatenated on merge and compacted (self-loops and repeats dropped)
 //! when the merged cluster re-scores its neighbours. A merge is allowed only if the merged
 //! size `n = n_A + n_B <= patch_max` and the merged cone bound
-//! ([`merge_cones`](super::cone::merge_cones)) has aperture `α <= max_aperture`. The priority
+//! ([`merge_cones`]) has aperture `α <= max_aperture`. The priority
 //! is `Φ = Φ_S · Φ_NC · Φ_B · Φ_Reg` with
 //!
 //! - size: `Φ_S = 1 - n / (2·patch_max)`, in `[1/2, 1)`: smaller merged patches first;
@@ -352,7 +352,9 @@ const SWEEP_FOUND: usize = 32;
 /// Adjacent leaves by sort-and-sweep of their widened boxes along the longest axis of all
 /// boxes: fills the half-edges. Each leaf examines at most [`SWEEP_SCAN`] successors and
 /// records at most [`SWEEP_FOUND`] of them, which bounds the work where many leaves share one
-/// box (duplicate points split by their normals) and never binds on a sampled surface.
+/// box (duplicate points split by their normals); on a sampled surface a leaf's slab holds
+/// about `2·sqrt(L)` leaves, so the caps do not bind there. A cap that binds (a dense 3D cloud)
+/// only drops adjacencies: fewer merges, never an invalid patch.
 fn adjacency(ws: &mut Workspace) {
     let leaves = &ws.leaves;
     let mut glo = [f64::INFINITY; 3];

@@ -140,6 +140,12 @@ fn layout_of_a_plane_fills_patches_near_patch_max() {
         "mean patch size {mean}"
     );
     assert!(patches.iter().all(|p| p.cone.half_angle < 1e-6));
+    // No patch under cluster_min is left over on a plane.
+    assert!(
+        patches
+            .iter()
+            .all(|p| p.members.len() >= params.cluster_min)
+    );
 }
 
 #[test]
@@ -302,4 +308,51 @@ fn layout_speed_on_a_sphere_cell() {
         patches.len(),
         pos.len() as f64 / patches.len().max(1) as f64
     );
+}
+
+/// Perimeter of an ellipse by numeric integration (independent of Ramanujan's formula).
+fn ellipse_perimeter(a: f64, b: f64) -> f64 {
+    let k = 100_000;
+    (0..k)
+        .map(|i| {
+            let t = (i as f64 + 0.5) * 2.0 * PI / k as f64;
+            (a * a * t.sin().powi(2) + b * b * t.cos().powi(2)).sqrt() * 2.0 * PI / k as f64
+        })
+        .sum()
+}
+
+#[test]
+fn compactness_is_the_isoperimetric_quotient_of_the_covariance_ellipse() {
+    // A w × h grid in a tilted plane through (5, -3, 2), the cone axis its normal.
+    let normal = normalize([1.0, 2.0, 2.0]).expect("unit");
+    let u = normalize(cross(normal, [0.0, 0.0, 1.0])).expect("unit");
+    let v = cross(normal, u);
+    for (w, h) in [(1.0, 1.0), (2.0, 1.0), (5.0, 1.0), (1.0, 0.0)] {
+        let side = 201;
+        let items: Vec<Item> = (0..side * side)
+            .map(|k| {
+                let s = w * ((k % side) as f64 / (side - 1) as f64 - 0.5);
+                let t = h * ((k / side) as f64 / (side - 1) as f64 - 0.5);
+                let p = [
+                    5.0 + s * u[0] + t * v[0],
+                    -3.0 + s * u[1] + t * v[1],
+                    2.0 + s * u[2] + t * v[2],
+                ];
+                Item { p, i: k as u32 }
+            })
+            .collect();
+        let cone = Cone {
+            axis: normal,
+            half_angle: 0.0,
+        };
+        let c = new_cluster(&items, [1.0, 1.0, 1.0], Some(cone));
+        // A uniform grid's variances are proportional to w² and h², so the ellipse is w : h.
+        let want = if h == 0.0 {
+            0.0
+        } else {
+            4.0 * PI * PI * w * h / ellipse_perimeter(w, h).powi(2)
+        };
+        let got = compactness(&c);
+        assert!((got - want).abs() < 1e-3, "{w} x {h}: {got} vs {want}");
+    }
 }
