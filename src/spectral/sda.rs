@@ -80,21 +80,29 @@ pub fn grid_for(n: usize, lo: [f64; 2], hi: [f64; 2], kappa: f64) -> Grid {
     let mut step = if smax > 0.0 && smax.is_finite() {
         let area = (s1 * s2).max(smax * smax * 1e-12);
         let k = (kappa.max(1e-6) * n.max(1) as f64 / area).sqrt();
-        // At least one cell across the larger side.
-        (1.0 / k).min(smax)
+        // At least one cell across the larger side; never zero (an overflowing κ).
+        let step = (1.0 / k).min(smax);
+        if step > 0.0 && step.is_finite() {
+            step
+        } else {
+            smax
+        }
     } else {
         1.0
     };
+    // Node counts in f64 first, so that an absurd κ or box cannot overflow the product.
     let dims = |step: f64| {
-        let nu = ((s1 / step).ceil() as usize + 1).max(2);
-        let nv = ((s2 / step).ceil() as usize + 1).max(2);
-        (nu, nv)
+        (
+            ((s1 / step).ceil() + 1.0).max(2.0),
+            ((s2 / step).ceil() + 1.0).max(2.0),
+        )
     };
-    let (mut nu, mut nv) = dims(step);
-    while nu * nv > cap {
+    let (mut fu, mut fv) = dims(step);
+    while fu * fv > cap as f64 {
         step *= 1.05;
-        (nu, nv) = dims(step);
+        (fu, fv) = dims(step);
     }
+    let (nu, nv) = (fu as usize, fv as usize);
     Grid {
         nu,
         nv,
@@ -425,6 +433,8 @@ mod tests {
         assert!(g.lo[1] + (g.nv - 1) as f64 * g.step >= 0.5);
         let needle = grid_for(100, [0.0, 0.0], [1.0, 1e-12], 1.0);
         assert!(needle.nu * needle.nv <= 4 * 100 + 16 && needle.nu >= 2 && needle.nv >= 2);
+        let wild = grid_for(1000, [0.0, 0.0], [1.0, 1e-300], 1e300);
+        assert!(wild.nu * wild.nv <= 4 * 1000 + 16);
         let point = grid_for(10, [3.0, 3.0], [3.0, 3.0], 1.0);
         assert_eq!((point.nu, point.nv), (2, 2));
     }
