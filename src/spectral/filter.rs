@@ -386,16 +386,49 @@ pub fn band_limit(
     fft: &mut Fft2,
     work: &mut FilterWork,
 ) -> f64 {
+    band_limit_by(grid_h, nu, nv, max_err, Bound::Max, fft, work)
+}
+
+/// How [`band_limit_by`] bounds the change of the heights.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Bound {
+    /// Every height: the sum of the removed coefficients' magnitudes over the node count (the
+    /// triangle inequality). Safe, but broadband content of small amplitude (approximation
+    /// residue, noise) adds up as the square root of the coefficient count, so on real data
+    /// it keeps nearly the whole band.
+    Max,
+    /// The RMS of the heights' change: the removed coefficients' energy (Parseval).
+    Rms,
+}
+
+/// [`band_limit`] under either bound.
+pub fn band_limit_by(
+    grid_h: &[f64],
+    nu: usize,
+    nv: usize,
+    max_err: f64,
+    bound: Bound,
+    fft: &mut Fft2,
+    work: &mut FilterWork,
+) -> f64 {
     let (_, eu, ev) = detrended_spectrum(grid_h, nu, nv, fft, work);
-    let budget = max_err.max(0.0) * (eu * ev) as f64;
+    let n = (eu * ev) as f64;
+    let budget = match bound {
+        Bound::Max => max_err.max(0.0) * n,
+        Bound::Rms => (max_err.max(0.0) * n).powi(2),
+    };
     let s = &work.spec;
     let hk = s.half();
     work.order.clear();
     for j in 0..ev {
         for k in 0..hk {
             if k != 0 || j != 0 {
-                work.order
-                    .push((s.radial(k, j), s.multiplicity(k) * s.c[j * hk + k].norm()));
+                let c = s.c[j * hk + k];
+                let v = match bound {
+                    Bound::Max => s.multiplicity(k) * c.norm(),
+                    Bound::Rms => s.multiplicity(k) * c.norm_sqr(),
+                };
+                work.order.push((s.radial(k, j), v));
             }
         }
     }

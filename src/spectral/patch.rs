@@ -339,8 +339,16 @@ pub fn build(
             noise = a.noise_rms.unwrap_or(0.0);
         }
         Treatment::BandLimit { max_err, min_band } => {
-            let band = filter::band_limit(&grid.h, nu, nv, max_err, &mut work.fft, &mut work.filt)
-                .max(min_band);
+            let band = filter::band_limit_by(
+                &grid.h,
+                nu,
+                nv,
+                max_err,
+                filter::Bound::Rms,
+                &mut work.fft,
+                &mut work.filt,
+            )
+            .max(min_band);
             let cut = Filter::Ideal { cut: band };
             let a = filter::filter_grid(&mut grid.h, nu, nv, &cut, &mut work.fft, &mut work.filt);
             parseval = a.parseval_rms;
