@@ -25,8 +25,11 @@
 //! `s = Σ (|p| - R) R a g(u) / Σ (R a g(u))²`.
 //!
 //! Points exactly on the surface give `s = 1`; a smoothing that flattens the bumps towards the
-//! base sphere gives `s < 1` (0 for the sphere itself); zero-mean noise along the radius leaves
-//! `s` unbiased.
+//! base sphere gives `s < 1` (0 for the sphere itself). Zero-mean noise along the radius leaves
+//! `s` unbiased, but noise across it moves `u` and so `g(u)`, the regressor (errors in
+//! variables): `s` is diluted by about `var(g) / (var(g) + var(∇g · δu))`, a fraction of a
+//! percent for `synth`'s default bumpy sphere at noise 0.002. Compare a filter's `s` with the
+//! noisy input's, not only with 1.
 //!
 //! Sums are sequential over the points in file order, and the per-point distances are
 //! computed in parallel into their own slots: the figures do not depend on the number of
@@ -222,6 +225,10 @@ pub fn run_check_points(
             "give a truth file or a reference, not both".to_string(),
         ));
     }
+    // A bad truth file is reported before a large point file is read.
+    let truth = truth
+        .map(|path| Truth::load(path).map(|t| (path, t)))
+        .transpose()?;
     let pts = read_points(input)?;
     if pts.is_empty() {
         return Err(Error::input(
@@ -248,8 +255,7 @@ pub fn run_check_points(
         max_rel: f64::NAN,
         relief_scale: None,
     };
-    let (mut d, diagonal) = if let Some(path) = truth {
-        let t = Truth::load(path)?;
+    let (mut d, diagonal) = if let Some((path, t)) = truth {
         report.against = PointsAgainst::Truth;
         report.reference = Some(path.to_path_buf());
         report.shape = Some(t.shape().name().to_string());
