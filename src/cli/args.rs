@@ -393,15 +393,16 @@ pub struct ReconstructArgs {
 /// `scanflow check`.
 #[derive(Args, Debug)]
 pub struct CheckArgs {
-    /// The mesh (PLY).
-    pub mesh: PathBuf,
+    /// The mesh (a PLY with faces), or a point file (a PLY without faces, LAS/LAZ, XYZ/PTS):
+    /// then every point's distance to the truth or reference is measured.
+    pub input: PathBuf,
     /// Exact surface written by `synth` (.truth.json).
     #[arg(long)]
     pub truth: Option<PathBuf>,
     /// Reference mesh or point file.
     #[arg(long)]
     pub reference: Option<PathBuf>,
-    /// Sample points for each distance direction.
+    /// Sample points for each distance direction (a mesh; a point file is measured whole).
     #[arg(long, default_value_t = DEFAULT_CHECK_SAMPLES)]
     pub samples: usize,
     /// Print JSON instead of text.

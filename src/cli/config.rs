@@ -419,8 +419,8 @@ pub fn default_work_dir(output: &Path) -> PathBuf {
 
 /// `scanflow check`.
 pub struct CheckConfig {
-    /// The mesh.
-    pub mesh: PathBuf,
+    /// The mesh or point file.
+    pub input: PathBuf,
     /// `--truth`.
     pub truth: Option<PathBuf>,
     /// `--reference` (the library refuses it together with a truth).
@@ -434,7 +434,7 @@ pub struct CheckConfig {
 impl CheckConfig {
     fn new(a: CheckArgs) -> CheckConfig {
         CheckConfig {
-            mesh: a.mesh,
+            input: a.input,
             truth: a.truth,
             reference: a.reference,
             samples: a.samples,

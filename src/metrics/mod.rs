@@ -1,4 +1,5 @@
-//! Distances and checks shared by tests, benches and `scanflow check`.
+//! Distances and checks shared by tests, benches and `scanflow check`, on meshes and on point
+//! clouds.
 //!
 //! # Mesh topology ([`check_mesh`])
 //!
@@ -47,13 +48,17 @@
 //! * `distance.rs`: sampled two-sided distances ([`mesh_to_truth`], [`mesh_to_reference`]);
 //!   the exact surfaces are sampled by [`crate::synth`]'s sampler, with the same seeded
 //!   generators and vector helpers;
-//! * `report.rs`: `scanflow check` ([`run_check`]) and its printed report.
+//! * `points.rs`: `scanflow check` on a point cloud ([`run_check_points`]): every point's
+//!   distance to a truth or reference, and the relief kept of the bumpy sphere
+//!   ([`relief_scale`]);
+//! * `report.rs`: `scanflow check` on a mesh ([`run_check`]) and its printed report.
 
 mod distance;
 #[cfg(test)]
 mod fixtures;
 mod mesh_check;
 mod nearest;
+mod points;
 mod report;
 
 pub use distance::{
@@ -62,6 +67,10 @@ pub use distance::{
 };
 pub use mesh_check::{MeshCheck, check_mesh};
 pub use nearest::{PointIndex, TriangleIndex, point_triangle_distance};
+pub use points::{
+    PointDistances, PointTarget, PointsAgainst, PointsReport, is_point_file, point_distances,
+    relief_scale, run_check_points,
+};
 pub use report::{Against, CheckParams, CheckReport, Comparison, run_check, run_check_with};
 
 use crate::io::mesh_read::Mesh;

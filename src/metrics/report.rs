@@ -189,7 +189,7 @@ const MAX_RESERVED_POINTS: u64 = 1 << 24;
 const READ_CHUNK_POINTS: u64 = 1 << 20;
 
 /// Every point of a point file.
-fn read_points(path: &Path) -> Result<Vec<[f64; 3]>> {
+pub(super) fn read_points(path: &Path) -> Result<Vec<[f64; 3]>> {
     let reader = crate::io::open(path)?;
     let mut pts = Vec::with_capacity(reader.len().min(MAX_RESERVED_POINTS) as usize);
     let mut batch = PointBatch::default();

@@ -1,4 +1,5 @@
 mod bad_input;
+mod check_points;
 mod clean_mesh;
 mod cli;
 mod colour;
