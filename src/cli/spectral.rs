@@ -303,7 +303,7 @@ pub fn run(c: &SpectralConfig, ctx: &Ctx) -> Result<()> {
                     work_dir: work.to_path_buf(),
                     ..c.params.clone()
                 };
-                spectral::spectrum(store, &c.output, *images, &p, ctx)
+                scanflow::pipeline::spectrum::spectrum(store, &c.output, *images, &p, ctx)
             })?;
             summary("analysed", &r.stats, &c.output);
             let bands: Vec<String> = r

@@ -17,6 +17,7 @@ pub mod ingest;
 mod points;
 pub mod reconstruct;
 pub mod spectral;
+pub mod spectrum;
 mod tiles;
 pub mod workdir;
 

@@ -149,9 +149,36 @@ impl Sums {
     }
 }
 
+/// What pass 1 counts: the run's statistics and the sums over its patches.
+pub(super) struct Tally {
+    pub(super) st: SpectralStats,
+    sums: Sums,
+}
+
+impl Tally {
+    pub(super) fn new(store: &Store) -> Tally {
+        Tally {
+            st: SpectralStats {
+                points_in: store.manifest.point_count,
+                cells: store.manifest.cells.len(),
+                diagonal: store.manifest.bounds.diagonal(),
+                ..Default::default()
+            },
+            sums: Sums::default(),
+        }
+    }
+
+    /// The statistics, with the patch sums folded in.
+    pub(super) fn finish(self) -> SpectralStats {
+        let mut st = self.st;
+        self.sums.into_stats(&mut st);
+        st
+    }
+}
+
 /// What pass 1 keeps of a cell: where its patches reach.
 #[derive(Debug, Clone)]
-struct CellReach {
+pub(super) struct CellReach {
     /// Union of its patches' world bounds (empty when it has none).
     reach: Aabb,
 }
@@ -185,7 +212,7 @@ fn read_patches(path: &Path) -> Result<Vec<Patch>> {
 }
 
 /// The store's normals, or an error naming it.
-fn check_store(store: &Store) -> Result<()> {
+pub(super) fn check_store(store: &Store) -> Result<()> {
     if !store.layout.attrs.normal {
         return Err(Error::input(
             &store.dir,
@@ -213,12 +240,11 @@ fn next_wave(store: &Store, i: usize, threads: usize, share: u64, per_point: u64
     (j, bytes)
 }
 
+/// Positions with their normals.
+type Oriented = (Vec<[f64; 3]>, Vec<[f32; 3]>);
+
 /// The points of cells other than `c` within the box `reach`.
-fn gather_halo(
-    cells: &mut Cells<'_>,
-    c: usize,
-    reach: &Aabb,
-) -> Result<(Vec<[f64; 3]>, Vec<[f32; 3]>)> {
+fn gather_halo(cells: &mut Cells<'_>, c: usize, reach: &Aabb) -> Result<Oriented> {
     let (mut pos, mut nor) = (Vec::new(), Vec::new());
     let entries = &cells.store.manifest.cells;
     for o in 0..entries.len() {
@@ -238,13 +264,12 @@ fn gather_halo(
 
 /// Pass 1 over every cell: patches fitted and treated, checkpointed in `dir`. `inspect` sees
 /// each cell's points and patches as they are made (not for checkpoints reused).
-fn pass1(
+pub(super) fn pass1(
     store: &Store,
     treat: &Treatment,
     params: &SpectralParams,
     ctx: &Ctx,
-    st: &mut SpectralStats,
-    sums: &mut Sums,
+    tally: &mut Tally,
     mut inspect: impl FnMut(usize, &PointBatch, &CellPatches) -> Result<()>,
     raw: &(dyn Fn(usize, usize, &mut PatchWork) + Sync),
 ) -> Result<Vec<CellReach>> {
@@ -277,11 +302,14 @@ fn pass1(
         let mut todo = Vec::new();
         for c in i..j {
             let path = patch_path(&dir, c);
-            if params.resume && path.exists() {
-                if let Ok(p) = read_patches(&path) {
+            if params.resume
+                && path.exists()
+                && let Ok(p) = read_patches(&path)
+            {
+                {
                     reach.push((c, cell_reach(&p)));
-                    p.iter().for_each(|q| sums.add(q));
-                    st.resumed_cells += 1;
+                    p.iter().for_each(|q| tally.sums.add(q));
+                    tally.st.resumed_cells += 1;
                     continue;
                 }
             }
@@ -327,8 +355,8 @@ fn pass1(
             w?;
         }
         for ((c, b), f) in todo.iter().zip(&fitted) {
-            f.patches.iter().for_each(|q| sums.add(q));
-            st.unpatched += f.unpatched;
+            f.patches.iter().for_each(|q| tally.sums.add(q));
+            tally.st.unpatched += f.unpatched;
             reach.push((*c, cell_reach(&f.patches)));
             inspect(*c, b, f)?;
         }
@@ -337,7 +365,7 @@ fn pass1(
     }
     reach.sort_by_key(|r| r.0);
     stage.finish(None);
-    st.secs_patches = t0.elapsed().as_secs_f64();
+    tally.st.secs_patches = t0.elapsed().as_secs_f64();
     Ok(reach
         .into_iter()
         .map(|(_, r)| CellReach { reach: r })
@@ -389,11 +417,14 @@ pub fn needs_double(bounds: &Aabb) -> bool {
     m * f32::EPSILON as f64 > bounds.diagonal() * crate::types::FLOAT32_SPACING
 }
 
+/// One cell's patches, shared through the cache.
+type CellPatchSet = Arc<Vec<Patch>>;
+
 /// One wave of pass 2: its cells, their batches and the patches around each.
 struct Wave {
     cells: Vec<usize>,
     batches: Vec<Arc<PointBatch>>,
-    around: Vec<(Vec<Arc<Vec<Patch>>>, Vec<usize>)>,
+    around: Vec<(Vec<CellPatchSet>, Vec<usize>)>,
 }
 
 /// Load pass 2's wave `i..j`.
@@ -491,24 +522,17 @@ pub fn filter(
     ctx: &Ctx,
 ) -> Result<SpectralStats> {
     check_store(store)?;
-    let mut st = SpectralStats {
-        points_in: store.manifest.point_count,
-        cells: store.manifest.cells.len(),
-        diagonal: store.manifest.bounds.diagonal(),
-        ..Default::default()
-    };
-    let mut sums = Sums::default();
+    let mut tally = Tally::new(store);
     let reach = pass1(
         store,
         &Treatment::Filter(filter),
         params,
         ctx,
-        &mut st,
-        &mut sums,
+        &mut tally,
         |_, _, _| Ok(()),
         &|_, _, _| {},
     )?;
-    sums.into_stats(&mut st);
+    let mut st = tally.finish();
     let t0 = Instant::now();
     let (mut cells, mut files, _permits) = pass2_caches(store, params, ctx)?;
     let opts = PointFileOptions {
@@ -567,6 +591,13 @@ pub fn filter(
     Ok(st)
 }
 
+/// The band of a resampled patch is chosen for an RMS change of its heights of the error
+/// bound over this: a band-limited change peaks at a few times its RMS (√2 for one sinusoid),
+/// and the bound is on every point. Measured on an exact 80K-point bumpy sphere at
+/// `--max-error 5e-4`: the largest distance to the surface was twice the bound with the RMS
+/// at the bound itself, and within it with this factor.
+pub const PEAK_TO_RMS: f64 = 3.0;
+
 /// Options of [`resample`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ResampleParams {
@@ -588,17 +619,11 @@ pub fn resample(
     ctx: &Ctx,
 ) -> Result<SpectralStats> {
     check_store(store)?;
-    let mut st = SpectralStats {
-        points_in: store.manifest.point_count,
-        cells: store.manifest.cells.len(),
-        diagonal: store.manifest.bounds.diagonal(),
-        ..Default::default()
-    };
+    let mut tally = Tally::new(store);
     let treat = Treatment::BandLimit {
-        max_err: rp.max_error * st.diagonal,
+        max_err: rp.max_error * tally.st.diagonal / PEAK_TO_RMS,
         min_band: rp.min_band,
     };
-    let mut sums = Sums::default();
     // Expected points at the patches' own rates: rate times the area their members stand for.
     let mut expected = 0f64;
     let reach = pass1(
@@ -606,12 +631,11 @@ pub fn resample(
         &treat,
         params,
         ctx,
-        &mut st,
-        &mut sums,
+        &mut tally,
         |_, _, _| Ok(()),
         &|_, _, _| {},
     )?;
-    sums.into_stats(&mut st);
+    let mut st = tally.finish();
     let t0 = Instant::now();
     let (mut cells, mut files, _permits) = pass2_caches(store, params, ctx)?;
     let n = store.manifest.cells.len();
@@ -640,7 +664,7 @@ pub fn resample(
         let (j, bytes) = next_wave(store, i, ctx.threads(), share, PASS2_BYTES_PER_POINT);
         let _permit = ctx.budget.acquire(bytes, "a wave of resampled cells")?;
         let wave = load_wave(&mut cells, &mut files, &reach, i, j)?;
-        let done: Vec<(Vec<[f64; 3]>, Vec<[f32; 3]>, u64)> = ctx.pool.install(|| {
+        let done: Vec<(Oriented, u64)> = ctx.pool.install(|| {
             wave.cells
                 .par_iter()
                 .zip(wave.around.par_iter())
@@ -649,11 +673,11 @@ pub fn resample(
                     let around = Around::new(all);
                     let (mut p, mut nn) = (Vec::new(), Vec::new());
                     let fb = cell::resample_cell(&around, &mine, scale, &mut p, &mut nn);
-                    (p, nn, fb)
+                    ((p, nn), fb)
                 })
                 .collect()
         });
-        for (p, nn, fb) in done {
+        for ((p, nn), fb) in done {
             use std::io::Write;
             let mut buf = Vec::with_capacity(p.len() * 36);
             for (a, b) in p.iter().zip(&nn) {
@@ -710,263 +734,4 @@ fn write_spill(spill: &Path, count: u64, output: &Path, bounds: &Aabb) -> Result
         out.write(&b)?;
     }
     out.finish()
-}
-
-/// Radial band edges of `spectrum`'s energy summary, relative to the Nyquist frequency.
-pub const BAND_EDGES: [f64; 6] = [0.0, 0.125, 0.25, 0.5, 0.75, 1.5];
-
-/// Least side of a spectrum image, pixels (small grids are enlarged).
-const IMAGE_SIDE: usize = 128;
-
-/// What `spectrum` wrote besides its statistics.
-#[derive(Debug, Clone, Default, serde::Serialize)]
-pub struct SpectrumReport {
-    /// The layout and height-field statistics.
-    pub stats: SpectralStats,
-    /// Band edges of `band_energy`.
-    pub band_edges: Vec<f64>,
-    /// Share of the height fields' energy (their mean plane removed) in each band, over all
-    /// patches.
-    pub band_energy: Vec<f64>,
-    /// The power-spectrum images written, with their patches.
-    pub images: Vec<SpectrumImage>,
-}
-
-/// One power-spectrum image.
-#[derive(Debug, Clone, Default, serde::Serialize)]
-pub struct SpectrumImage {
-    /// File name inside the output directory.
-    pub file: String,
-    /// Global patch number (as in the layout file).
-    pub patch: u64,
-    /// Store cell and patch within it.
-    pub cell: usize,
-    /// Grid size.
-    pub grid: [u32; 2],
-    /// Members.
-    pub members: u32,
-}
-
-/// Analyse `store`'s patches: write `dir/layout.ply` (every point with its patch's number
-/// and a colour for it), power-spectrum images (`dir/spectrum-*.png`) of the first patch of
-/// `images` cells spread evenly over the store, and `dir/summary.json`.
-pub fn spectrum(
-    store: &Store,
-    dir: &Path,
-    images: usize,
-    params: &SpectralParams,
-    ctx: &Ctx,
-) -> Result<SpectrumReport> {
-    use std::sync::Mutex;
-    check_store(store)?;
-    let n = store.manifest.cells.len();
-    let chosen = chosen_patches(store, images, params.layout.patch_max);
-    let mut st = SpectralStats {
-        points_in: store.manifest.point_count,
-        cells: n,
-        diagonal: store.manifest.bounds.diagonal(),
-        ..Default::default()
-    };
-    let staging = atomic::TempDir::create(dir)?;
-    let opts = PointFileOptions {
-        double: needs_double(&store.manifest.bounds),
-        scalar: Some("patch".to_string()),
-    };
-    let attrs = Attributes {
-        normal: true,
-        color: true,
-        ..Attributes::default()
-    };
-    let mut layout_ply = PointPlyWriter::create_with(
-        &staging.path().join("layout.ply"),
-        st.points_in,
-        attrs,
-        opts,
-    )?;
-    let energies: Mutex<Vec<(usize, usize, Vec<f64>)>> = Mutex::new(Vec::new());
-    let pictures: Mutex<Vec<(usize, usize, Vec<u8>, [u32; 2])>> = Mutex::new(Vec::new());
-    let raw = |c: usize, k: usize, w: &mut PatchWork| {
-        let g = &w.raw;
-        let e = crate::spectral::filter::band_energy(
-            &g.h,
-            g.nu,
-            g.nv,
-            &BAND_EDGES,
-            &mut w.fft,
-            &mut w.filt,
-        );
-        if let Ok(mut v) = energies.lock() {
-            v.push((c, k, e));
-        }
-        if chosen.contains(&(c, k)) {
-            let img = power_png(&w.raw.clone(), &mut w.fft);
-            if let Ok(mut v) = pictures.lock() {
-                v.push((c, k, img, [g.nu as u32, g.nv as u32]));
-            }
-        }
-    };
-    let mut sums = Sums::default();
-    let mut next_id = 0u64;
-    let mut first_of_cell = vec![0u64; n];
-    let mut members_of: std::collections::BTreeMap<(usize, usize), u32> = Default::default();
-    let quiet = SpectralParams {
-        resume: false,
-        ..params.clone()
-    };
-    pass1(
-        store,
-        &Treatment::Keep,
-        &quiet,
-        ctx,
-        &mut st,
-        &mut sums,
-        |c, b, f| {
-            first_of_cell[c] = next_id;
-            for &(cc, k) in chosen.iter().filter(|x| x.0 == c) {
-                members_of.insert((cc, k), f.patches.get(k).map_or(0, |p| p.members));
-            }
-            let mut out = PointBatch {
-                pos: b.pos.clone(),
-                normal: b.normal.clone(),
-                ..Default::default()
-            };
-            let ids: Vec<f32> = f
-                .patch_of
-                .iter()
-                .map(|&k| {
-                    if k == u32::MAX {
-                        -1.0
-                    } else {
-                        (next_id + k as u64) as f32
-                    }
-                })
-                .collect();
-            out.color = f
-                .patch_of
-                .iter()
-                .map(|&k| {
-                    if k == u32::MAX {
-                        [32768; 4]
-                    } else {
-                        patch_colour(next_id + k as u64)
-                    }
-                })
-                .collect();
-            next_id += f.patches.len() as u64;
-            layout_ply.write_with(&out, Some(&ids))
-        },
-        &raw,
-    )?;
-    layout_ply.finish()?;
-    sums.into_stats(&mut st);
-    st.points_out = st.points_in;
-    let mut e = energies.into_inner().unwrap_or_default();
-    e.sort_by_key(|x| (x.0, x.1));
-    let mut band = vec![0f64; BAND_EDGES.len() - 1];
-    for (_, _, v) in &e {
-        for (b, x) in band.iter_mut().zip(v) {
-            *b += x;
-        }
-    }
-    let total: f64 = band.iter().sum();
-    if total > 0.0 {
-        band.iter_mut().for_each(|b| *b /= total);
-    }
-    let mut pics = pictures.into_inner().unwrap_or_default();
-    pics.sort_by_key(|p| (p.0, p.1));
-    let mut report = SpectrumReport {
-        stats: st,
-        band_edges: BAND_EDGES.to_vec(),
-        band_energy: band,
-        images: Vec::new(),
-    };
-    for (c, k, png, grid) in pics {
-        let id = first_of_cell[c] + k as u64;
-        let file = format!("spectrum-{id:06}.png");
-        atomic::write(&staging.path().join(&file), &png, Durability::Renamed)?;
-        report.images.push(SpectrumImage {
-            file,
-            patch: id,
-            cell: c,
-            grid,
-            members: members_of.get(&(c, k)).copied().unwrap_or(0),
-        });
-    }
-    let json = serde_json::to_string_pretty(&report)
-        .map_err(|e| Error::Internal(format!("summary.json: {e}")))?;
-    atomic::write(
-        &staging.path().join("summary.json"),
-        json.as_bytes(),
-        Durability::Renamed,
-    )?;
-    staging.commit(dir)?;
-    Ok(report)
-}
-
-/// The patches (cell, patch in cell) whose spectra `spectrum` draws: `images` of them spread
-/// over the cells in Morton order and over the patches within a cell (a cell's patch count is
-/// estimated from its points and the largest patch size).
-fn chosen_patches(store: &Store, images: usize, patch_max: usize) -> Vec<(usize, usize)> {
-    let cells = &store.manifest.cells;
-    let n = cells.len();
-    if images == 0 || n == 0 {
-        return Vec::new();
-    }
-    let per = images.div_ceil(n);
-    let mut out = Vec::new();
-    for i in 0..images.min(n) {
-        let c = i * n / images.min(n);
-        let stride = (cells[c].count as usize / patch_max.max(1) / per).max(1);
-        out.extend((0..per).map(|j| (c, j * stride)));
-    }
-    out.truncate(images);
-    out
-}
-
-/// A colour for patch `id`, far from its neighbours' (golden-ratio hues).
-fn patch_colour(id: u64) -> [u16; 4] {
-    let h = (id as f64 * 0.618_033_988_75).fract() * 6.0;
-    let x = 1.0 - (h % 2.0 - 1.0).abs();
-    let (r, g, b) = match h as u32 {
-        0 => (1.0, x, 0.0),
-        1 => (x, 1.0, 0.0),
-        2 => (0.0, 1.0, x),
-        3 => (0.0, x, 1.0),
-        4 => (x, 0.0, 1.0),
-        _ => (1.0, 0.0, x),
-    };
-    let c = |v: f64| (40000.0 * v + 20000.0) as u16;
-    [c(r), c(g), c(b), 65535]
-}
-
-/// The log power spectrum of a grid's heights (mean removed), DC at the centre, as an 8-bit
-/// grey PNG spanning six decades below its peak.
-fn power_png(g: &crate::spectral::sda::Grid, fft: &mut crate::spectral::fft::Fft2) -> Vec<u8> {
-    let mean = g.h.iter().sum::<f64>() / g.h.len().max(1) as f64;
-    let h: Vec<f64> = g.h.iter().map(|x| x - mean).collect();
-    let mut s = crate::spectral::fft::Spectrum::default();
-    fft.forward(&h, g.nu, g.nv, &mut s);
-    let p = s.power_image();
-    let top = p.iter().copied().fold(0f64, f64::max).max(1e-300);
-    let scale = (IMAGE_SIDE / g.nu.min(g.nv).max(1)).max(1);
-    let (w, hh) = (g.nu * scale, g.nv * scale);
-    let mut px = vec![0u8; w * hh];
-    for y in 0..hh {
-        for x in 0..w {
-            let v = p[(y / scale) * g.nu + x / scale].max(top * 1e-6);
-            px[y * w + x] = (255.0 * (1.0 + (v / top).log10() / 6.0))
-                .round()
-                .clamp(0.0, 255.0) as u8;
-        }
-    }
-    let mut out = Vec::new();
-    {
-        let mut e = png::Encoder::new(&mut out, w as u32, hh as u32);
-        e.set_color(png::ColorType::Grayscale);
-        e.set_depth(png::BitDepth::Eight);
-        if let Ok(mut wr) = e.write_header() {
-            let _ = wr.write_image_data(&px);
-        }
-    }
-    out
 }

@@ -51,7 +51,7 @@ impl Buckets {
 
     fn empty(lo: [f64; 3], hi: [f64; 3], s: f64, n: usize) -> Buckets {
         let mut s = s.max((0..3).map(|k| hi[k] - lo[k]).fold(0f64, f64::max) / MAX_DIM as f64);
-        if !(s > 0.0) {
+        if s.is_nan() || s <= 0.0 {
             s = 1.0;
         }
         let mut dims = [0usize; 3];

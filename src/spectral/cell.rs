@@ -19,7 +19,7 @@
 //!
 //! **Resampling (§6)** replaces pass 2's points by new ones: each patch places candidates on
 //! its surface from a progressive Poisson-disk pattern ([`pattern`](super::pattern)) tiled
-//! over its box at the highest rate among the patches around it; a candidate survives where
+//! over its members' rectangle at the highest rate among the patches around it; a candidate survives where
 //! this patch weighs most among those admitting it (so that each place is sampled by one
 //! patch) and where its index in the pattern is below the blended rate's count for a tile
 //! (the prefix property thins the pattern to any density). Its position and normal are blended
@@ -306,12 +306,15 @@ pub fn resample_cell(
             .map(|&i| around.patches[i as usize].rate as f64)
             .fold(patch.rate as f64, f64::max)
             * scale;
-        if !(top > 0.0) {
+        if top.is_nan() || top <= 0.0 {
             continue;
         }
         // Tiles of the pattern: at `top`, one tile holds the whole pattern.
         let t = (plen / top).sqrt();
-        let bx = patch.frame.bx;
+        // Candidates within the members' rectangle: every place on the surface lies in the
+        // rectangle of the patch it is a member of, whose weight there is about 1, and a
+        // patch's margin beyond its members is extrapolated.
+        let bx = patch.frame.core;
         let (tu, tv) = (
             ((bx[2] - bx[0]) / t).ceil().max(1.0) as usize,
             ((bx[3] - bx[1]) / t).ceil().max(1.0) as usize,
@@ -325,7 +328,7 @@ pub fn resample_cell(
                         continue;
                     }
                     let s = patch.sample_at(u, v);
-                    if !(s.weight > 0.0) {
+                    if s.weight.is_nan() || s.weight <= 0.0 {
                         continue;
                     }
                     let n = s.normal.map(|x| x as f32);

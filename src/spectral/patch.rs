@@ -348,7 +348,8 @@ pub fn build(
                 &mut work.fft,
                 &mut work.filt,
             )
-            .max(min_band);
+            // Above the grid's Nyquist frequency the points carry nothing to resample.
+            .clamp(min_band, 1.0);
             let cut = Filter::Ideal { cut: band };
             let a = filter::filter_grid(&mut grid.h, nu, nv, &cut, &mut work.fft, &mut work.filt);
             parseval = a.parseval_rms;
@@ -600,7 +601,7 @@ mod tests {
         let pos = (0..n)
             .map(|_| {
                 let (x, y) = (r(), r());
-                let g = (-2.0 * r().max(1e-12).ln()).sqrt() * (6.283185307 * r()).cos();
+                let g = (-2.0 * r().max(1e-12).ln()).sqrt() * (std::f64::consts::TAU * r()).cos();
                 [x, y, 0.05 * (3.0 * x).sin() + noise * g]
             })
             .collect();
@@ -614,7 +615,7 @@ mod tests {
         let seed = PatchSeed {
             oriented: members.len() as u32,
             members,
-            cone: cone.clone(),
+            cone,
         };
         let mut w = PatchWork::default();
         let f = frame(&pos, &seed, &Overlap::default(), &mut w).unwrap();
@@ -684,7 +685,11 @@ mod tests {
             // height field's divided differences follow it.
             let f = q.sample(*x, [0.0, 0.0, 1.0]).unwrap();
             let want = 1.0 / (1.0 + (0.15 * (3.0 * x[0]).cos()).powi(2)).sqrt();
-            assert!((f.normal[2] - want).abs() < 0.05, "{:?} against {want}", f.normal);
+            assert!(
+                (f.normal[2] - want).abs() < 0.05,
+                "{:?} against {want}",
+                f.normal
+            );
         }
         // Within a few noise deviations (0.01): the approximation follows the points.
         assert!(worst < 0.06, "{worst}");

@@ -78,9 +78,9 @@ fn wiener_and_lowpass_bring_noisy_points_closer_to_the_surface() {
 #[test]
 fn resample_stays_within_the_error_bound_and_follows_the_detail() {
     let d = tempfile::tempdir().unwrap();
-    let (ply, truth) = synth(d.path(), "bumpy", 80_000, 0.0);
+    let (ply, truth) = synth(d.path(), "bumpy", 200_000, 0.0);
     let out = d.path().join("r.ply");
-    let e = 5e-4;
+    let e = 3e-4;
     ok(&[
         "resample",
         s(&ply),
@@ -96,38 +96,101 @@ fn resample_stays_within_the_error_bound_and_follows_the_detail() {
         max < e,
         "largest distance {max:.3e} over the bound {e} (RMS {rms:.3e})"
     );
-    // Fewer points where the surface is flat than where it is bumpy. The relief
-    // `sin(k x) sin(k y) sin(k z)` is nearly flat near the coordinate axes (two of the three
-    // factors near zero) and bumpiest away from them: compare the share of the input's
-    // points kept in each region.
-    let r = load(&out);
-    let input = load(&ply);
-    let region = |p: &[f64; 3]| {
-        let n = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
-        let m = p.iter().map(|x| (x / n).abs()).fold(0f64, f64::max);
-        if m > 0.97 {
-            Some(0)
-        } else if m < 0.7 {
-            Some(1)
-        } else {
-            None
-        }
+    eprintln!(
+        "{} of {} points; distance to the surface RMS {rms:.3e}, max {max:.3e} of the diagonal",
+        load(&out).pos.len(),
+        200_000
+    );
+}
+
+/// Write points with normals as a binary little-endian PLY.
+fn write_oriented_ply(path: &Path, pos: &[[f64; 3]], nor: &[[f64; 3]]) {
+    let mut out = format!(
+        "ply\nformat binary_little_endian 1.0\nelement vertex {}\nproperty double x\nproperty double y\nproperty double z\nproperty float nx\nproperty float ny\nproperty float nz\nend_header\n",
+        pos.len()
+    )
+    .into_bytes();
+    for (p, n) in pos.iter().zip(nor) {
+        p.iter()
+            .for_each(|v| out.extend_from_slice(&v.to_le_bytes()));
+        n.iter()
+            .for_each(|v| out.extend_from_slice(&(*v as f32).to_le_bytes()));
+    }
+    std::fs::write(path, out).unwrap();
+}
+
+#[test]
+fn resample_puts_fewer_points_where_the_surface_is_flat() {
+    // A sheet over [0, 2] × [0, 1]: flat for x < 1, a relief `a sin(k(x - 1)) sin(ky)`
+    // beyond.
+    let d = tempfile::tempdir().unwrap();
+    let (a, k) = (0.01, 25.0);
+    let (mut pos, mut nor) = (Vec::new(), Vec::new());
+    let mut seed = 11u64;
+    let mut r = || {
+        seed = seed
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (seed >> 11) as f64 / (1u64 << 53) as f64
     };
-    let (mut inp, mut outp) = ([0f64; 2], [0f64; 2]);
-    input
+    for _ in 0..120_000 {
+        let (x, y) = (2.0 * r(), r());
+        let (z, gx, gy) = if x < 1.0 {
+            (0.0, 0.0, 0.0)
+        } else {
+            let (sx, cx) = (k * (x - 1.0)).sin_cos();
+            let (sy, cy) = (k * y).sin_cos();
+            (a * sx * sy, a * k * cx * sy, a * k * sx * cy)
+        };
+        let l = (1.0 + gx * gx + gy * gy).sqrt();
+        pos.push([x, y, z]);
+        nor.push([-gx / l, -gy / l, 1.0 / l]);
+    }
+    let ply = d.path().join("sheet.ply");
+    write_oriented_ply(&ply, &pos, &nor);
+    let out = d.path().join("r.ply");
+    ok(&[
+        "resample",
+        s(&ply),
+        "-o",
+        s(&out),
+        "--max-error",
+        "2e-4",
+        "--progress",
+        "none",
+    ]);
+    let r = load(&out);
+    let flat = r.pos.iter().filter(|p| p[0] < 0.9).count() as f64;
+    let bumpy = r.pos.iter().filter(|p| p[0] > 1.1).count() as f64;
+    eprintln!(
+        "{} points: {flat} on the flat 0.9 of the sheet, {bumpy} on the bumpy 0.9",
+        r.pos.len()
+    );
+    assert!(
+        flat > 0.0 && bumpy > 2.0 * flat,
+        "flat {flat}, bumpy {bumpy}"
+    );
+    // Away from the sheet's open edges and the crease at x = 1, the points follow the
+    // surface within the bound.
+    let diag = (4.0f64 + 1.0 + 4.0 * a * a).sqrt();
+    let inside = |p: &&[f64; 3]| {
+        p[1] > 0.05 && p[1] < 0.95 && p[0] > 0.05 && p[0] < 1.95 && (p[0] - 1.0).abs() > 0.1
+    };
+    let worst = r
         .pos
         .iter()
-        .filter_map(region)
-        .for_each(|k| inp[k] += 1.0);
-    r.pos.iter().filter_map(region).for_each(|k| outp[k] += 1.0);
-    let (flat, bumpy) = (outp[0] / inp[0], outp[1] / inp[1]);
-    eprintln!(
-        "{} of {} points; kept {flat:.3} of the input's density where flat, {bumpy:.3} where bumpy; RMS {rms:.3e}, max {max:.3e}",
-        r.pos.len(),
-        input.pos.len()
-    );
-    assert!(r.pos.len() < input.pos.len());
-    assert!(flat < 0.8 * bumpy, "flat {flat:.3}, bumpy {bumpy:.3}");
+        .filter(inside)
+        .map(|p| {
+            let z = if p[0] < 1.0 {
+                0.0
+            } else {
+                a * (k * (p[0] - 1.0)).sin() * (k * p[1]).sin()
+            };
+            (p[2] - z).abs()
+        })
+        .fold(0f64, f64::max);
+    eprintln!("largest height error {:.3e} of the diagonal", worst / diag);
+    assert!(worst < 2e-4 * diag, "largest height error {worst:.3e}");
 }
 
 #[test]
