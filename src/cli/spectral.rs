@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Result, bail};
 
-use scanflow::exec::Ctx;
+use scanflow::exec::{Ctx, human_bytes, peak_rss_bytes};
 use scanflow::pipeline::spectral::{self, ResampleParams, SpectralParams, SpectralStats};
 use scanflow::pipeline::workdir::RunIdentity;
 use scanflow::spectral::filter::Filter;
@@ -326,13 +326,15 @@ pub fn run(c: &SpectralConfig, ctx: &Ctx) -> Result<()> {
 fn summary(verb: &str, st: &SpectralStats, output: &Path) {
     let secs = st.secs_patches + st.secs_blend;
     outln!(
-        "{verb} {} points into {} in {:.2} s ({:.0} points/s; patches {:.2} s, blending {:.2} s)",
+        "{verb} {} points into {} in {:.2} s ({:.0} points/s; patches {:.2} s, of which layout {:.2} s; blending {:.2} s); peak memory {}",
         st.points_in,
         output.display(),
         secs,
         st.points_in as f64 / secs.max(1e-9),
         st.secs_patches,
-        st.secs_blend
+        st.secs_layout,
+        st.secs_blend,
+        human_bytes(peak_rss_bytes())
     );
     outln!(
         "patches: {} (members min {:.0}, mean {:.0}, max {:.0}; normal cone mean {:.1}°, max {:.1}°)",

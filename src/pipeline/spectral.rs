@@ -98,6 +98,8 @@ pub struct SpectralStats {
     pub diagonal: f64,
     /// Seconds in pass 1 (layout, height fields, spectra, filters).
     pub secs_patches: f64,
+    /// Of those, seconds in the layout and the patches' frames.
+    pub secs_layout: f64,
     /// Seconds in pass 2 (blending or resampling, and writing).
     pub secs_blend: f64,
 }
@@ -315,6 +317,7 @@ pub(super) fn pass1(
             }
             todo.push((c, cells.get(c)?));
         }
+        let tl = Instant::now();
         let plans: Vec<CellPlan> = ctx.pool.install(|| {
             todo.par_iter()
                 .map_init(PatchWork::default, |w, (_, b)| {
@@ -322,6 +325,7 @@ pub(super) fn pass1(
                 })
                 .collect()
         });
+        tally.st.secs_layout += tl.elapsed().as_secs_f64();
         let mut halos = Vec::with_capacity(todo.len());
         for ((c, _), plan) in todo.iter().zip(&plans) {
             let ext = entries[*c].bounds.extent().into_iter().fold(0f64, f64::max);
