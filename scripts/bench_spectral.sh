@@ -17,7 +17,7 @@
 # same points (lower rms ratio is better, higher speed ratio is better).
 #
 # usage: scripts/bench_spectral.sh            N=1000000 by default; N=200000 for a quick run
-#   THREADS=2   SHAPES="sphere torus bumpy"   NOISES="0.002 0.005"   LOWPASS="0.2 0.3 0.45 0.6"
+#   THREADS=2   SHAPES="sphere torus bumpy"   NOISES="0.002 0.005"   LOWPASS="0.1 0.15 0.2 0.3 0.45"
 #   PEER_ARGS="..."  extra arguments for spectral_peers.py (e.g. --jet-k 24,48 --peers jet)
 #   PEERS=0        scanflow rows only
 #   BUILD=0        use the existing target/release/scanflow (default: cargo build --release first)
@@ -31,7 +31,7 @@ N=${N:-1000000}
 THREADS=${THREADS:-2}
 SHAPES=${SHAPES:-sphere torus bumpy}
 NOISES=${NOISES:-0.002 0.005}
-LOWPASS=${LOWPASS:-0.2 0.3 0.45 0.6}
+LOWPASS=${LOWPASS:-0.1 0.15 0.2 0.3 0.45}
 PEERS=${PEERS:-1}
 
 # --- Python side: CGAL's bindings, scipy, numpy
