@@ -380,16 +380,7 @@ impl ReconstructConfig {
             .map(PathBuf::as_path)
             .collect();
         paths::not_an_input(&a.output, &given)?;
-        if let Some(w) = &a.work_dir
-            && !paths::parent(w).is_dir()
-        {
-            bail!(
-                "--work-dir {}: directory {} does not exist",
-                w.display(),
-                paths::parent(w).display()
-            );
-        }
-        let work_dir = a.work_dir.unwrap_or_else(|| default_work_dir(&a.output));
+        let work_dir = work_dir(a.work_dir, &a.output)?;
         let mut params = ReconParams::new(a.depth, work_dir);
         params.tile_voxels = a.tile;
         params.resume = a.resume;
@@ -407,6 +398,19 @@ impl ReconstructConfig {
             params,
             keep_work: a.keep_work,
         })
+    }
+}
+
+/// `--work-dir` when given (its parent must exist), else `OUTPUT.work`.
+pub(super) fn work_dir(given: Option<PathBuf>, output: &Path) -> Result<PathBuf> {
+    match given {
+        Some(w) if !paths::parent(&w).is_dir() => bail!(
+            "--work-dir {}: directory {} does not exist",
+            w.display(),
+            paths::parent(&w).display()
+        ),
+        Some(w) => Ok(w),
+        None => Ok(default_work_dir(output)),
     }
 }
 

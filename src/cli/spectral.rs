@@ -13,7 +13,7 @@ use scanflow::spectral::layout::LayoutParams;
 use scanflow::spectral::patch::Overlap;
 
 use super::args::{FilterArgs, ResampleArgs, SpectralInputs, SpectrumArgs};
-use super::config::{Points, RunConfig, default_work_dir};
+use super::config::{Points, RunConfig, work_dir};
 use super::paths;
 use super::reconstruct::WorkRun;
 
@@ -87,16 +87,7 @@ impl SpectralConfig {
             .map(PathBuf::as_path)
             .collect();
         paths::not_an_input(&output, &given)?;
-        if let Some(w) = &a.work_dir
-            && !paths::parent(w).is_dir()
-        {
-            bail!(
-                "--work-dir {}: directory {} does not exist",
-                w.display(),
-                paths::parent(w).display()
-            );
-        }
-        let work_dir = a.work_dir.unwrap_or_else(|| default_work_dir(&output));
+        let work_dir = work_dir(a.work_dir, &output)?;
         let points = Points::new(a.inputs, a.conf, &a.normal)?;
         Ok(SpectralConfig {
             run,

@@ -132,3 +132,13 @@ pub fn temp_files(dir: &Path) -> Vec<PathBuf> {
     }
     out
 }
+
+/// Read every point of a point file.
+pub fn load(path: &Path) -> scanflow::types::PointBatch {
+    let r = scanflow::io::open(path).unwrap();
+    let mut b = scanflow::types::PointBatch::default();
+    for c in r.chunks(1 << 16).unwrap() {
+        r.read_chunk(&c, false, &mut b).unwrap();
+    }
+    b
+}

@@ -9,16 +9,6 @@ use scanflow::types::PointBatch;
 
 use super::common::*;
 
-/// Read every point of a point file.
-fn load(path: &Path) -> PointBatch {
-    let r = scanflow::io::open(path).unwrap();
-    let mut b = PointBatch::default();
-    for c in r.chunks(1 << 16).unwrap() {
-        r.read_chunk(&c, false, &mut b).unwrap();
-    }
-    b
-}
-
 /// Write positions only, as a binary little-endian float32 PLY.
 fn write_xyz_ply(path: &Path, pos: &[[f64; 3]]) {
     let mut out = format!(

@@ -5,19 +5,8 @@
 use std::path::Path;
 
 use scanflow::io::mesh_read::{Mesh, read_mesh};
-use scanflow::types::PointBatch;
 
 use super::common::*;
-
-/// Every point of a point file.
-fn load(path: &Path) -> PointBatch {
-    let r = scanflow::io::open(path).unwrap();
-    let mut b = PointBatch::default();
-    for c in r.chunks(1 << 16).unwrap() {
-        r.read_chunk(&c, false, &mut b).unwrap();
-    }
-    b
-}
 
 /// Write `pos + t` (float64) and, when given, the normals (float32) as a binary PLY.
 fn write_f64_ply(path: &Path, pos: &[[f64; 3]], normals: Option<&[[f32; 3]]>, t: [f64; 3]) {

@@ -4,19 +4,8 @@
 use std::path::Path;
 
 use scanflow::synth::Truth;
-use scanflow::types::PointBatch;
 
 use super::common::*;
-
-/// Read every point of a point file.
-fn load(path: &Path) -> PointBatch {
-    let r = scanflow::io::open(path).unwrap();
-    let mut b = PointBatch::default();
-    for c in r.chunks(1 << 16).unwrap() {
-        r.read_chunk(&c, false, &mut b).unwrap();
-    }
-    b
-}
 
 /// RMS and largest distance of the points of `path` to the exact surface, relative to its
 /// bounding-box diagonal.
