@@ -1,7 +1,7 @@
 //! A store cell's share of the work: its patches (pass 1), and its points' blended positions
 //! or its resampled points (pass 2).
 //!
-//! **Pass 1** lays out the cell's own points into patches ([`layout`](super::layout)), frames
+//! **Pass 1** lays out the cell's own points into patches ([`layout`]), frames
 //! them ([`patch::frame`]), and fits each one's height field to its members and to every
 //! point of the cell or its *halo* that its box admits. The halo is the points of other cells
 //! within [`CellPlan::reach`] of the cell's box, the farthest any patch's box reaches out, so

@@ -14,8 +14,8 @@
 //! make neighbouring patches agree where they blend.
 //!
 //! **Height field.** The admitted `(u, v, h)` are approximated on a regular grid of about
-//! `κ·n` nodes by push-pull ([`sda`](super::sda)); the grid's heights are then filtered in the
-//! frequency domain ([`filter`](super::filter)).
+//! `κ·n` nodes by push-pull ([`sda`]); the grid's heights are then filtered in the
+//! frequency domain ([`filter`]).
 //!
 //! **Blending function (§7).** The members are splatted onto the grid with bilinear weights,
 //! convolved with a binomial approximation of a Gaussian (σ = 1 node), and divided by the
