@@ -8,7 +8,7 @@ use anyhow::{Result, bail};
 use scanflow::exec::{Ctx, human_bytes, peak_rss_bytes};
 use scanflow::pipeline::spectral::{self, ResampleParams, SpectralParams, SpectralStats};
 use scanflow::pipeline::workdir::RunIdentity;
-use scanflow::spectral::filter::Filter;
+use scanflow::spectral::filter::{Filter, MAX_FREQ};
 use scanflow::spectral::layout::LayoutParams;
 use scanflow::spectral::patch::Overlap;
 
@@ -16,10 +16,6 @@ use super::args::{FilterArgs, ResampleArgs, SpectralInputs, SpectrumArgs};
 use super::config::{Points, RunConfig, work_dir};
 use super::paths;
 use super::reconstruct::WorkRun;
-
-/// Highest frequency a filter may name: the corner of the spectrum, √2 times the Nyquist
-/// frequency of an axis.
-const MAX_FREQ: f64 = std::f64::consts::SQRT_2;
 
 /// Least band a resampled patch keeps (relative to its grid's Nyquist frequency): flat
 /// patches still get a point every ten input spacings.
@@ -146,18 +142,11 @@ impl SpectralConfig {
     }
 }
 
-/// A frequency relative to the Nyquist frequency, in (0, √2].
-fn freq(opt: &str, s: &str) -> Result<f64> {
-    let f: f64 = s
-        .trim()
+/// A number given to `opt` in `s`.
+fn number(opt: &str, s: &str, what: &str, x: &str) -> Result<f64> {
+    x.trim()
         .parse()
-        .map_err(|_| anyhow::anyhow!("{opt}: \"{s}\" is not a number"))?;
-    if !(f > 0.0 && f <= MAX_FREQ) {
-        bail!(
-            "{opt}: frequency {f} out of range: expected (0, {MAX_FREQ:.4}] (relative to the Nyquist frequency)"
-        );
-    }
-    Ok(f)
+        .map_err(|_| anyhow::anyhow!("{opt} {s}: {what} \"{x}\" is not a number"))
 }
 
 /// `A,B,G`: a band from `A` to `B` and its gain.
@@ -166,18 +155,15 @@ fn band(opt: &str, s: &str) -> Result<(f64, f64, f64)> {
     if v.len() != 3 {
         bail!("{opt} {s}: expected A,B,G (band from A to B, gain G)");
     }
-    let (lo, hi) = (freq(opt, v[0])?, freq(opt, v[1])?);
-    if lo >= hi {
-        bail!("{opt} {s}: the band's start {lo} is not below its end {hi}");
-    }
-    let g: f64 = v[2]
-        .trim()
-        .parse()
-        .map_err(|_| anyhow::anyhow!("{opt} {s}: gain \"{}\" is not a number", v[2]))?;
-    Ok((lo, hi, g))
+    Ok((
+        number(opt, s, "frequency", v[0])?,
+        number(opt, s, "frequency", v[1])?,
+        number(opt, s, "gain", v[2])?,
+    ))
 }
 
-/// The one filter the options name.
+/// The one filter the options name, checked by [`Filter::check`] (the library's rules, its
+/// message prefixed with the option).
 fn parse_filter(a: &FilterArgs) -> Result<Filter> {
     let given = [
         a.lowpass.is_some(),
@@ -192,46 +178,37 @@ fn parse_filter(a: &FilterArgs) -> Result<Filter> {
             "one filter at a time: give only one of --lowpass, --bandstop, --enhance, --wiener"
         ),
     }
-    if let Some(s) = &a.lowpass {
+    let (opt, s, filter) = if let Some(s) = &a.lowpass {
         let Some((kind, f)) = s.split_once(':') else {
             bail!("--lowpass {s}: expected gauss:F or ideal:F");
         };
-        let cut = freq("--lowpass", f)?;
-        return match kind {
-            "gauss" => Ok(Filter::Gauss { cut }),
-            "ideal" => Ok(Filter::Ideal { cut }),
+        let cut = number("--lowpass", s, "frequency", f)?;
+        let filter = match kind {
+            "gauss" => Filter::Gauss { cut },
+            "ideal" => Filter::Ideal { cut },
             k => bail!("--lowpass {s}: unknown kind \"{k}\": expected gauss or ideal"),
         };
-    }
-    if let Some(s) = &a.bandstop {
+        ("--lowpass", s.as_str(), filter)
+    } else if let Some(s) = &a.bandstop {
         let (lo, hi, gain) = band("--bandstop", s)?;
-        if !(0.0..1.0).contains(&gain) {
-            bail!(
-                "--bandstop {s}: gain {gain} out of range: expected [0, 1) (0 removes the band; use --enhance to amplify)"
-            );
-        }
-        return Ok(Filter::BandStop { lo, hi, gain });
-    }
-    if let Some(s) = &a.enhance {
+        ("--bandstop", s.as_str(), Filter::BandStop { lo, hi, gain })
+    } else if let Some(s) = &a.enhance {
         let (lo, hi, gain) = band("--enhance", s)?;
-        if !(gain > 1.0 && gain.is_finite()) {
-            bail!(
-                "--enhance {s}: gain {gain} out of range: expected more than 1 (use --bandstop to attenuate)"
-            );
-        }
-        return Ok(Filter::Enhance { lo, hi, gain });
-    }
-    let s = a.wiener.as_deref().unwrap_or("auto");
-    if s == "auto" {
-        return Ok(Filter::Wiener { snr: None });
-    }
-    let snr: f64 = s
-        .parse()
-        .map_err(|_| anyhow::anyhow!("--wiener {s}: expected a signal-to-noise power ratio (a number), or nothing to estimate the noise"))?;
-    if !(snr > 0.0 && snr.is_finite()) {
-        bail!("--wiener {s}: expected a positive signal-to-noise power ratio");
-    }
-    Ok(Filter::Wiener { snr: Some(snr) })
+        ("--enhance", s.as_str(), Filter::Enhance { lo, hi, gain })
+    } else {
+        let s = a.wiener.as_deref().unwrap_or("auto");
+        let snr = match s {
+            "auto" => None,
+            x => Some(x.parse::<f64>().map_err(|_| {
+                anyhow::anyhow!("--wiener {s}: expected a signal-to-noise power ratio (a number), or nothing to estimate the noise")
+            })?),
+        };
+        ("--wiener", s, Filter::Wiener { snr })
+    };
+    filter
+        .check()
+        .map_err(|e| anyhow::anyhow!("{opt} {s}: {e}"))?;
+    Ok(filter)
 }
 
 /// The options that change a spectral run's output, for its identity.

@@ -58,6 +58,10 @@ use super::fft::{Fft2, Spectrum};
 /// Lower edge (in `r`) of the spectral tail whose mean power estimates white noise.
 pub const NOISE_TAIL: f64 = 0.7;
 
+/// Highest frequency a filter may name: the corner of the spectrum, √2 times the Nyquist
+/// frequency of an axis.
+pub const MAX_FREQ: f64 = std::f64::consts::SQRT_2;
+
 /// A filter in the frequency domain; frequencies relative to the grid's Nyquist (module docs).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Filter {
@@ -98,33 +102,44 @@ pub enum Filter {
 }
 
 impl Filter {
-    /// Check that the parameters make a filter: positive finite cuts, `0 <= lo < hi`, a
-    /// band-stop gain in `[0, 1]`, an enhancement gain `>= 1`, a positive finite SNR.
+    /// Check that the parameters make a filter: every frequency in `(0, √2]` (the corner of
+    /// the spectrum, relative to the Nyquist frequency), a band's start below its end, a
+    /// band-stop gain in `[0, 1)` (1 would change nothing; above, it enhances), an
+    /// enhancement gain above 1, a positive finite signal-to-noise ratio. The one place
+    /// these rules live: the command line reports its options' errors through it.
     pub fn check(&self) -> Result<()> {
         let bad = |msg: String| Err(Error::Usage(msg));
+        let freq = |f: f64| {
+            if f > 0.0 && f <= MAX_FREQ {
+                Ok(())
+            } else {
+                bad(format!(
+                    "frequency {f} out of range: expected (0, {MAX_FREQ:.4}] (relative to the Nyquist frequency)"
+                ))
+            }
+        };
         match *self {
-            Filter::Ideal { cut } | Filter::Gauss { cut } if !(cut > 0.0 && cut.is_finite()) => {
-                bad(format!(
-                    "low-pass cut must be a positive frequency (relative to Nyquist), found {cut}"
-                ))
+            Filter::Ideal { cut } | Filter::Gauss { cut } => freq(cut),
+            Filter::BandStop { lo, hi, gain } | Filter::Enhance { lo, hi, gain } => {
+                freq(lo)?;
+                freq(hi)?;
+                if lo >= hi {
+                    return bad(format!("the band's start {lo} is not below its end {hi}"));
+                }
+                match self {
+                    Filter::BandStop { .. } if !(0.0..1.0).contains(&gain) => bad(format!(
+                        "gain {gain} out of range: expected [0, 1) (0 removes the band; use --enhance to amplify)"
+                    )),
+                    Filter::Enhance { .. } if !(gain > 1.0 && gain.is_finite()) => bad(format!(
+                        "gain {gain} out of range: expected more than 1 (use --bandstop to attenuate)"
+                    )),
+                    _ => Ok(()),
+                }
             }
-            Filter::BandStop { lo, hi, .. } | Filter::Enhance { lo, hi, .. }
-                if !(lo >= 0.0 && hi > lo && hi.is_finite()) =>
-            {
-                bad(format!(
-                    "band must satisfy 0 <= lo < hi (relative to Nyquist), found lo {lo}, hi {hi}"
-                ))
-            }
-            Filter::BandStop { gain, .. } if !(0.0..=1.0).contains(&gain) => {
-                bad(format!("band-stop gain must lie in [0, 1], found {gain}"))
-            }
-            Filter::Enhance { gain, .. } if !(gain >= 1.0 && gain.is_finite()) => bad(format!(
-                "enhancement gain must be a finite number >= 1, found {gain}"
-            )),
             Filter::Wiener { snr: Some(s) } if !(s > 0.0 && s.is_finite()) => bad(format!(
-                "Wiener signal-to-noise ratio must be positive and finite, found {s}"
+                "expected a positive signal-to-noise power ratio, found {s}"
             )),
-            _ => Ok(()),
+            Filter::Wiener { .. } => Ok(()),
         }
     }
 
