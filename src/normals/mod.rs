@@ -50,7 +50,7 @@ use crate::exec::Ctx;
 use crate::exec::budget::Share;
 use crate::exec::cache::Lru;
 use crate::store::Staged;
-use crate::store::manifest::{CellEntry, EstimatedNormals};
+use crate::store::manifest::{CellEntry, EstimatedNormals, next_wave};
 use crate::types::{Aabb, Viewpoint};
 use estimate::{Halo, OwnFit};
 use orient::{Cross, Node};
@@ -232,22 +232,6 @@ pub fn estimate_cells(
     ))
 }
 
-/// The end of the wave of cells starting at `i`: at most [`CELLS_PER_THREAD`] a thread, and
-/// (beyond its first cell) within `share` bytes of working memory. Returns the end and bytes.
-fn next_wave(cells: &[CellEntry], i: usize, threads: usize, share: u64) -> (usize, u64) {
-    let mut j = i;
-    let mut bytes = 0u64;
-    while j < cells.len() && j - i < CELLS_PER_THREAD * threads {
-        let b = cells[j].count * BYTES_PER_POINT;
-        if j > i && bytes + b > share {
-            break;
-        }
-        bytes += b;
-        j += 1;
-    }
-    (j, bytes)
-}
-
 /// Pass 1: fit and orient every cell locally, wave by wave; each cell's normals and
 /// components go to a side file.
 fn fit_cells(
@@ -277,7 +261,13 @@ fn fit_cells(
     let mut results: Vec<CellResult> = Vec::with_capacity(cells.len());
     let mut i = 0;
     while i < cells.len() {
-        let (j, bytes) = next_wave(cells, i, ctx.threads(), share);
+        let (j, bytes) = next_wave(
+            cells,
+            i,
+            CELLS_PER_THREAD * ctx.threads(),
+            share,
+            BYTES_PER_POINT,
+        );
         let ids: Vec<usize> = (i..j).collect();
         let _permit = ctx
             .budget

@@ -26,6 +26,7 @@ use crate::spectral::checkpoint;
 use crate::spectral::layout::LayoutParams;
 use crate::spectral::patch::{Overlap, Patch, PatchWork, Treatment};
 use crate::store::Store;
+use crate::store::manifest::next_wave;
 use crate::types::{Aabb, Attributes, PointBatch};
 
 /// Bytes held per point of a cell in pass 1: its record decoded (about 64), its halo's share
@@ -183,6 +184,27 @@ impl Tally {
 pub(super) struct CellReach {
     /// Union of its patches' world bounds (empty when it has none).
     reach: Aabb,
+    /// Points a resampling of each of its patches at its own rate gives (0 unless
+    /// resampling), in patch order.
+    points: Vec<f64>,
+}
+
+impl CellReach {
+    /// What a cell's patches tell pass 2.
+    fn of(patches: &[Patch]) -> CellReach {
+        let mut reach = Aabb::EMPTY;
+        let mut points = Vec::with_capacity(patches.len());
+        for p in patches {
+            let (lo, hi) = p.frame.world_bounds();
+            reach.add(lo);
+            reach.add(hi);
+            // The rate times the area the members stand for (their share of the box's points).
+            let b = p.frame.bx;
+            let area = (b[2] - b[0]) * (b[3] - b[1]) * p.members as f64 / p.admitted.max(1) as f64;
+            points.push(p.rate as f64 * area);
+        }
+        CellReach { reach, points }
+    }
 }
 
 /// A cache of decoded store cells.
@@ -225,21 +247,6 @@ pub(super) fn check_store(store: &Store) -> Result<()> {
         return Err(Error::input(&store.dir, "no points"));
     }
     Ok(())
-}
-
-/// The cells of a wave starting at `i` that fit `share` bytes at `per_point` (at least one).
-fn next_wave(store: &Store, i: usize, threads: usize, share: u64, per_point: u64) -> (usize, u64) {
-    let cells = &store.manifest.cells;
-    let (mut j, mut bytes) = (i, 0u64);
-    while j < cells.len() && j - i < CELLS_PER_THREAD * threads {
-        let b = cells[j].count * per_point;
-        if j > i && bytes + b > share {
-            break;
-        }
-        bytes += b;
-        j += 1;
-    }
-    (j, bytes)
 }
 
 /// Positions with their normals.
@@ -297,7 +304,13 @@ pub(super) fn pass1(
     let mut reach = Vec::with_capacity(entries.len());
     let mut i = 0;
     while i < entries.len() {
-        let (j, bytes) = next_wave(store, i, ctx.threads(), share, PASS1_BYTES_PER_POINT);
+        let (j, bytes) = next_wave(
+            &store.manifest.cells,
+            i,
+            CELLS_PER_THREAD * ctx.threads(),
+            share,
+            PASS1_BYTES_PER_POINT,
+        );
         let _permit = ctx
             .budget
             .acquire(bytes, "a wave of spectral patch cells")?;
@@ -308,12 +321,10 @@ pub(super) fn pass1(
                 && path.exists()
                 && let Ok(p) = read_patches(&path)
             {
-                {
-                    reach.push((c, cell_reach(&p)));
-                    p.iter().for_each(|q| tally.sums.add(q));
-                    tally.st.resumed_cells += 1;
-                    continue;
-                }
+                reach.push((c, CellReach::of(&p)));
+                p.iter().for_each(|q| tally.sums.add(q));
+                tally.st.resumed_cells += 1;
+                continue;
             }
             todo.push((c, cells.get(c)?));
         }
@@ -361,7 +372,7 @@ pub(super) fn pass1(
         for ((c, b), f) in todo.iter().zip(&fitted) {
             f.patches.iter().for_each(|q| tally.sums.add(q));
             tally.st.unpatched += f.unpatched;
-            reach.push((*c, cell_reach(&f.patches)));
+            reach.push((*c, CellReach::of(&f.patches)));
             inspect(*c, b, f)?;
         }
         stage.inc(entries[i..j].iter().map(|e| e.count).sum());
@@ -370,21 +381,7 @@ pub(super) fn pass1(
     reach.sort_by_key(|r| r.0);
     stage.finish(None);
     tally.st.secs_patches = t0.elapsed().as_secs_f64();
-    Ok(reach
-        .into_iter()
-        .map(|(_, r)| CellReach { reach: r })
-        .collect())
-}
-
-/// Union of the patches' world bounds.
-fn cell_reach(patches: &[Patch]) -> Aabb {
-    let mut b = Aabb::EMPTY;
-    for p in patches {
-        let (lo, hi) = p.frame.world_bounds();
-        b.add(lo);
-        b.add(hi);
-    }
-    b
+    Ok(reach.into_iter().map(|(_, r)| r).collect())
 }
 
 /// The cells whose patches reach cell `c`'s points, ascending.
@@ -550,7 +547,13 @@ pub fn filter(
     let n = store.manifest.cells.len();
     let mut i = 0;
     while i < n {
-        let (j, bytes) = next_wave(store, i, ctx.threads(), share, PASS2_BYTES_PER_POINT);
+        let (j, bytes) = next_wave(
+            &store.manifest.cells,
+            i,
+            CELLS_PER_THREAD * ctx.threads(),
+            share,
+            PASS2_BYTES_PER_POINT,
+        );
         let _permit = ctx
             .budget
             .acquire(bytes, "a wave of spectral blending cells")?;
@@ -628,8 +631,6 @@ pub fn resample(
         max_err: rp.max_error * tally.st.diagonal / PEAK_TO_RMS,
         min_band: rp.min_band,
     };
-    // Expected points at the patches' own rates: rate times the area their members stand for.
-    let mut expected = 0f64;
     let reach = pass1(
         store,
         &treat,
@@ -643,16 +644,8 @@ pub fn resample(
     let t0 = Instant::now();
     let (mut cells, mut files, _permits) = pass2_caches(store, params, ctx)?;
     let n = store.manifest.cells.len();
-    if rp.points.is_some() {
-        for c in 0..n {
-            for p in files.get(c)?.iter() {
-                let b = p.frame.bx;
-                let area =
-                    (b[2] - b[0]) * (b[3] - b[1]) * p.members as f64 / p.admitted.max(1) as f64;
-                expected += p.rate as f64 * area;
-            }
-        }
-    }
+    // Points at the patches' own rates, summed in cell and patch order.
+    let expected: f64 = reach.iter().flat_map(|r| &r.points).sum();
     let scale = match rp.points {
         Some(target) if expected > 0.0 => target as f64 / expected,
         _ => 1.0,
@@ -665,7 +658,13 @@ pub fn resample(
     let mut i = 0;
     let mut count = 0u64;
     while i < n {
-        let (j, bytes) = next_wave(store, i, ctx.threads(), share, PASS2_BYTES_PER_POINT);
+        let (j, bytes) = next_wave(
+            &store.manifest.cells,
+            i,
+            CELLS_PER_THREAD * ctx.threads(),
+            share,
+            PASS2_BYTES_PER_POINT,
+        );
         let _permit = ctx.budget.acquire(bytes, "a wave of resampled cells")?;
         let wave = load_wave(&mut cells, &mut files, &reach, i, j)?;
         let done: Vec<(Oriented, u64)> = ctx.pool.install(|| {

@@ -119,6 +119,28 @@ pub struct CellEntry {
     pub crc32: u32,
 }
 
+/// The end of the wave of cells starting at `i`: at most `max_cells` cells and, beyond the
+/// first (always taken, so that a wave makes progress), within `share` bytes at `per_point`
+/// bytes per point. Returns the end and the bytes the wave holds.
+pub fn next_wave(
+    cells: &[CellEntry],
+    i: usize,
+    max_cells: usize,
+    share: u64,
+    per_point: u64,
+) -> (usize, u64) {
+    let (mut j, mut bytes) = (i, 0u64);
+    while j < cells.len() && j - i < max_cells {
+        let b = cells[j].count * per_point;
+        if j > i && bytes + b > share {
+            break;
+        }
+        bytes += b;
+        j += 1;
+    }
+    (j, bytes)
+}
+
 impl Manifest {
     /// Read and check a manifest.
     pub fn load(store: &Path) -> Result<Manifest> {
