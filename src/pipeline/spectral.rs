@@ -20,6 +20,7 @@ use crate::exec::Ctx;
 use crate::exec::budget::Share;
 use crate::exec::cache::Lru;
 use crate::io::atomic::{self, Durability};
+use crate::io::mesh_write::VertexFormat;
 use crate::io::ply_write::{PointFileOptions, PointPlyWriter};
 use crate::spectral::cell::{self, Around, CellPatches, CellPlan};
 use crate::spectral::checkpoint;
@@ -27,7 +28,7 @@ use crate::spectral::layout::LayoutParams;
 use crate::spectral::patch::{Overlap, Patch, PatchWork, Treatment};
 use crate::store::Store;
 use crate::store::manifest::next_wave;
-use crate::types::{Aabb, Attributes, PointBatch};
+use crate::types::{Aabb, Attributes, Cube, PointBatch};
 
 /// Bytes held per point of a cell in pass 1: its record decoded (about 64), its halo's share
 /// (as many again), the admission index (8), patch membership (8) and the patches' grids
@@ -410,12 +411,11 @@ impl PatchFiles {
     }
 }
 
-/// Positions as double when float32 would lose more than 2^-20 of the diagonal.
-pub fn needs_double(bounds: &Aabb) -> bool {
-    let m = (0..3)
-        .map(|k| bounds.min[k].abs().max(bounds.max[k].abs()))
-        .fold(0f64, f64::max);
-    m * f32::EPSILON as f64 > bounds.diagonal() * crate::types::FLOAT32_SPACING
+/// Positions as double where float32 would lose the input's resolution: the meshes' rule
+/// ([`VertexFormat::for_cube`]), on the store's cube, so that a filtered point file and a
+/// mesh of the same store agree.
+pub fn needs_double(cube: &Cube) -> bool {
+    VertexFormat::for_cube(cube.origin, cube.size, false, false).double
 }
 
 /// One cell's patches, shared through the cache.
@@ -537,7 +537,7 @@ pub fn filter(
     let t0 = Instant::now();
     let (mut cells, mut files, _permits) = pass2_caches(store, params, ctx)?;
     let opts = PointFileOptions {
-        double: needs_double(&store.manifest.bounds),
+        double: needs_double(&store.manifest.cube),
         scalar: scalar.then(|| "parseval_error".to_string()),
     };
     let mut out =
@@ -698,7 +698,7 @@ pub fn resample(
     }
     stage.finish(None);
     drop(spill_w);
-    write_spill(&spill, count, output, &store.manifest.bounds)?;
+    write_spill(&spill, count, output, &store.manifest.cube)?;
     std::fs::remove_file(&spill).with_path(&spill)?;
     st.points_out = count;
     st.secs_blend = t0.elapsed().as_secs_f64();
@@ -706,10 +706,10 @@ pub fn resample(
 }
 
 /// Copy `count` spilled points (position f64 ×3, normal f32 ×3) into a point PLY.
-fn write_spill(spill: &Path, count: u64, output: &Path, bounds: &Aabb) -> Result<()> {
+fn write_spill(spill: &Path, count: u64, output: &Path, cube: &Cube) -> Result<()> {
     use std::io::Read;
     let opts = PointFileOptions {
-        double: needs_double(bounds),
+        double: needs_double(cube),
         scalar: None,
     };
     let attrs = Attributes {

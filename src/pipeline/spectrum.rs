@@ -68,7 +68,7 @@ pub fn spectrum(
     let mut tally = Tally::new(store);
     let staging = atomic::TempDir::create(dir)?;
     let opts = PointFileOptions {
-        double: needs_double(&store.manifest.bounds),
+        double: needs_double(&store.manifest.cube),
         scalar: Some("patch".to_string()),
     };
     let attrs = Attributes {
