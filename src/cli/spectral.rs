@@ -243,35 +243,34 @@ pub fn run(c: &SpectralConfig, ctx: &Ctx) -> Result<()> {
         keep_work: c.keep_work,
     };
     let opts = options(c);
+    // The parameters with the work directory the run was given.
+    let in_work = |work: &Path| SpectralParams {
+        work_dir: work.to_path_buf(),
+        ..c.params.clone()
+    };
     let identity = |src: &_, mode, np: &_| RunIdentity::with_options(src, mode, np, &opts);
     match &c.job {
         Job::Filter { filter, scalar } => {
             let st = job.run(ctx, identity, |store, work| {
-                let p = SpectralParams {
-                    work_dir: work.to_path_buf(),
-                    ..c.params.clone()
-                };
-                spectral::filter(store, &c.output, *filter, *scalar, &p, ctx)
+                spectral::filter(store, &c.output, *filter, *scalar, &in_work(work), ctx)
             })?;
             summary("filtered", &st, &c.output);
         }
         Job::Resample(rp) => {
             let st = job.run(ctx, identity, |store, work| {
-                let p = SpectralParams {
-                    work_dir: work.to_path_buf(),
-                    ..c.params.clone()
-                };
-                spectral::resample(store, &c.output, rp, &p, ctx)
+                spectral::resample(store, &c.output, rp, &in_work(work), ctx)
             })?;
             summary("resampled", &st, &c.output);
         }
         Job::Spectrum { images } => {
             let r = job.run(ctx, identity, |store, work| {
-                let p = SpectralParams {
-                    work_dir: work.to_path_buf(),
-                    ..c.params.clone()
-                };
-                scanflow::pipeline::spectrum::spectrum(store, &c.output, *images, &p, ctx)
+                scanflow::pipeline::spectrum::spectrum(
+                    store,
+                    &c.output,
+                    *images,
+                    &in_work(work),
+                    ctx,
+                )
             })?;
             summary("analysed", &r.stats, &c.output);
             let bands: Vec<String> = r

@@ -385,6 +385,27 @@ pub(super) fn pass1(
     Ok(reach.into_iter().map(|(_, r)| r).collect())
 }
 
+/// Pass 1 for a run that only needs its patches: the cells' reach and the statistics.
+fn patches(
+    store: &Store,
+    treat: &Treatment,
+    params: &SpectralParams,
+    ctx: &Ctx,
+) -> Result<(Vec<CellReach>, SpectralStats)> {
+    check_store(store)?;
+    let mut tally = Tally::new(store);
+    let reach = pass1(
+        store,
+        treat,
+        params,
+        ctx,
+        &mut tally,
+        |_, _, _| Ok(()),
+        &|_, _, _| {},
+    )?;
+    Ok((reach, tally.finish()))
+}
+
 /// The cells whose patches reach cell `c`'s points, ascending.
 fn sources(store: &Store, reach: &[CellReach], c: usize) -> Vec<usize> {
     let b = &store.manifest.cells[c].bounds;
@@ -522,18 +543,7 @@ pub fn filter(
     params: &SpectralParams,
     ctx: &Ctx,
 ) -> Result<SpectralStats> {
-    check_store(store)?;
-    let mut tally = Tally::new(store);
-    let reach = pass1(
-        store,
-        &Treatment::Filter(filter),
-        params,
-        ctx,
-        &mut tally,
-        |_, _, _| Ok(()),
-        &|_, _, _| {},
-    )?;
-    let mut st = tally.finish();
+    let (reach, mut st) = patches(store, &Treatment::Filter(filter), params, ctx)?;
     let t0 = Instant::now();
     let (mut cells, mut files, _permits) = pass2_caches(store, params, ctx)?;
     let opts = PointFileOptions {
@@ -625,22 +635,11 @@ pub fn resample(
     params: &SpectralParams,
     ctx: &Ctx,
 ) -> Result<SpectralStats> {
-    check_store(store)?;
-    let mut tally = Tally::new(store);
     let treat = Treatment::BandLimit {
-        max_err: rp.max_error * tally.st.diagonal / PEAK_TO_RMS,
+        max_err: rp.max_error * store.manifest.bounds.diagonal() / PEAK_TO_RMS,
         min_band: rp.min_band,
     };
-    let reach = pass1(
-        store,
-        &treat,
-        params,
-        ctx,
-        &mut tally,
-        |_, _, _| Ok(()),
-        &|_, _, _| {},
-    )?;
-    let mut st = tally.finish();
+    let (reach, mut st) = patches(store, &treat, params, ctx)?;
     let t0 = Instant::now();
     let (mut cells, mut files, _permits) = pass2_caches(store, params, ctx)?;
     let n = store.manifest.cells.len();
