@@ -272,8 +272,13 @@ fn gather_halo(cells: &mut Cells<'_>, c: usize, reach: &Aabb) -> Result<Oriented
     Ok((pos, nor))
 }
 
+/// What sees each patch's grid before treatment: cell, patch in the cell, the worker's
+/// scratch holding the grid in `raw`.
+pub(super) type RawGrids<'a> = dyn Fn(usize, usize, &mut PatchWork) + Sync + 'a;
+
 /// Pass 1 over every cell: patches fitted and treated, checkpointed in `dir`. `inspect` sees
-/// each cell's points and patches as they are made (not for checkpoints reused).
+/// each cell's points and patches as they are made (not for checkpoints reused); `raw`, when
+/// given, each patch's grid before treatment.
 pub(super) fn pass1(
     store: &Store,
     treat: &Treatment,
@@ -281,7 +286,7 @@ pub(super) fn pass1(
     ctx: &Ctx,
     tally: &mut Tally,
     mut inspect: impl FnMut(usize, &PointBatch, &CellPatches) -> Result<()>,
-    raw: &(dyn Fn(usize, usize, &mut PatchWork) + Sync),
+    raw: Option<&RawGrids<'_>>,
 ) -> Result<Vec<CellReach>> {
     let t0 = Instant::now();
     let dir = params.work_dir.join(PATCHES_DIR);
@@ -347,11 +352,20 @@ pub(super) fn pass1(
         let fitted: Vec<CellPatches> = ctx.pool.install(|| {
             todo.par_iter()
                 .zip(plans.par_iter().zip(halos.par_iter()))
-                .map_init(PatchWork::default, |w, ((c, b), (plan, (hp, hn)))| {
-                    cell::fit_cell(&b.pos, &b.normal, hp, hn, plan, treat, w, |k, w| {
-                        raw(*c, k, w)
-                    })
-                })
+                .map_init(
+                    || {
+                        let mut w = PatchWork::default();
+                        w.keep_raw = raw.is_some();
+                        w
+                    },
+                    |w, ((c, b), (plan, (hp, hn)))| {
+                        cell::fit_cell(&b.pos, &b.normal, hp, hn, plan, treat, w, |k, w| {
+                            if let Some(raw) = raw {
+                                raw(*c, k, w)
+                            }
+                        })
+                    },
+                )
                 .collect()
         });
         drop(halos);
@@ -401,7 +415,7 @@ fn patches(
         ctx,
         &mut tally,
         |_, _, _| Ok(()),
-        &|_, _, _| {},
+        None,
     )?;
     Ok((reach, tally.finish()))
 }

@@ -98,7 +98,7 @@ pub fn spectrum(
             v.push((c, k, e));
         }
         if chosen.contains(&(c, k)) {
-            let img = power_png(&w.raw.clone(), &mut w.fft);
+            let img = power_png(&w.raw, &mut w.fft);
             if let Ok(mut v) = pictures.lock() {
                 v.push((c, k, img, [g.nu as u32, g.nv as u32]));
             }
@@ -152,7 +152,7 @@ pub fn spectrum(
             next_id += f.patches.len() as u64;
             layout_ply.write_with(&out, Some(&ids))
         },
-        &raw,
+        Some(&raw),
     )?;
     layout_ply.finish()?;
     let mut st = tally.finish();

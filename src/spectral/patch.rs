@@ -203,8 +203,10 @@ pub struct PatchWork {
     pub filt: FilterWork,
     cov: Vec<f64>,
     tmp: Vec<f64>,
-    /// The grid of the last patch built, before filtering (for spectra of chosen patches).
+    /// The grid of the last patch built, before filtering, when `keep_raw` (for spectra).
     pub raw: Grid,
+    /// Keep each patch's grid before treatment in `raw` (off: filtering copies nothing).
+    pub keep_raw: bool,
 }
 
 impl Default for PatchWork {
@@ -218,6 +220,7 @@ impl Default for PatchWork {
             cov: Vec::new(),
             tmp: Vec::new(),
             raw: sda::grid_for(1, [0.0; 2], [1.0; 2], 1.0),
+            keep_raw: false,
         }
     }
 }
@@ -328,7 +331,9 @@ pub fn build(
     let mut grid = sda::grid_for(pts.len(), [b[0], b[1]], [b[2], b[3]], 1.0);
     sda::push_pull(&mut grid, pts, &mut work.sda);
     let sda_rms = sda::rms_error(&grid, pts);
-    work.raw.clone_from(&grid);
+    if work.keep_raw {
+        work.raw.clone_from(&grid);
+    }
     let (nu, nv) = (grid.nu, grid.nv);
     let (mut parseval, mut noise, mut rate) = (0.0, 0.0, 0.0);
     match *treat {
@@ -617,7 +622,10 @@ mod tests {
             members,
             cone,
         };
-        let mut w = PatchWork::default();
+        let mut w = PatchWork {
+            keep_raw: true,
+            ..PatchWork::default()
+        };
         let f = frame(&pos, &seed, &Overlap::default(), &mut w).unwrap();
         let pts: Vec<[f64; 3]> = pos.iter().map(|p| f.local(*p)).collect();
         let p = build(f, &cone, &pts, pts.len(), treat, &mut w);
