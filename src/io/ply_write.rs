@@ -241,9 +241,14 @@ impl PointPlyWriter {
         }
         for (i, p) in batch.pos.iter().enumerate() {
             for (axis, &v) in ["x", "y", "z"].iter().zip(p) {
-                if !self.opts.double && !(v as f32).is_finite() || !v.is_finite() {
+                let (held, ty) = if self.opts.double {
+                    (v.is_finite(), "double")
+                } else {
+                    ((v as f32).is_finite(), "float32")
+                };
+                if !held {
                     return Err(Error::Usage(format!(
-                        "{}: point {}: {axis} is {v}, which a float32 cannot hold",
+                        "{}: point {}: {axis} is {v}, which a {ty} cannot hold",
                         self.final_path.display(),
                         self.written + i as u64
                     )));
