@@ -32,12 +32,14 @@
 pub mod error;
 pub mod exec;
 pub mod extract;
+pub mod geom;
 pub mod io;
 pub mod metrics;
 pub mod normals;
 pub mod pipeline;
 pub mod recon;
 pub mod spectral;
+pub mod spline;
 pub mod store;
 pub mod surface;
 pub mod synth;

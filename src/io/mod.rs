@@ -34,6 +34,7 @@
 
 pub mod atomic;
 pub mod conf;
+pub mod iges;
 pub mod las;
 pub mod mesh_read;
 pub mod mesh_write;

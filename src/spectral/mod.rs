@@ -13,7 +13,7 @@
 //!    members are in, and every point is a member of exactly one patch.
 //! 2. **Height fields (§3)**, [`patch`]: each patch's base plane is normal to its cone's axis;
 //!    its parameter box is the smallest enclosing rectangle of its members' projections
-//!    ([`rect`]), grown by 10% for the overlap, where points of neighbouring patches (and of
+//!    ([`crate::geom::rect`]), grown by 10% for the overlap, where points of neighbouring patches (and of
 //!    neighbouring cells: the *halo*) join when their normals lie within the cone widened by
 //!    π/8.
 //! 3. **Scattered-data approximation (§3)**, [`sda`]: the heights are approximated on a
@@ -58,5 +58,4 @@ pub mod filter;
 pub mod layout;
 pub mod patch;
 pub mod pattern;
-pub mod rect;
 pub mod sda;

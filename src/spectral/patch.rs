@@ -27,7 +27,7 @@ use super::cone::Cone;
 use super::fft::Fft2;
 use super::filter::{self, Filter, FilterWork};
 use super::layout::PatchSeed;
-use super::rect::min_area_rect;
+use crate::geom::rect::min_area_rect;
 use super::sda::{self, Grid, SdaWork};
 
 /// How far a patch reaches beyond its members.

@@ -6,7 +6,8 @@
 //!
 //! By concern: [`geom`] (boxes, the root cube, rigid transforms), [`keys`] (octree cell keys,
 //! Morton codes, grid edge keys), [`points`] (point batches, attributes, viewpoints), [`mesh`]
-//! (the global marching-cubes grid and a tile's mesh) and [`field`] (a tile's fixed-point
+//! (the global marching-cubes grid and a tile's mesh), [`spline`] (a tensor-product B-spline
+//! surface) and [`field`] (a tile's fixed-point
 //! field, as recon hands it to extract). Everything is re-exported here, so `crate::types::X`
 //! names every type.
 
@@ -15,9 +16,11 @@ pub mod geom;
 pub mod keys;
 pub mod mesh;
 pub mod points;
+pub mod spline;
 
 pub use field::{Axis, Blend, Detail, FIELD_LIMIT, Leaf, MAX_SHIFT, VALUE_LIMIT, WEIGHT_BITS};
 pub use geom::{Aabb, Cube, Rigid};
 pub use keys::{CellKey, EdgeKey, MAX_LEVEL, demorton3, morton3};
 pub use mesh::{FLOAT32_SPACING, GridGeom, TileMesh};
 pub use points::{Attributes, PointBatch, Viewpoint};
+pub use spline::TensorSurface;

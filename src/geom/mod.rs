@@ -1,0 +1,9 @@
+//! Plane geometry shared by stages: pure kernels on slices, no files, threads or budget.
+//!
+//! [`rect`]: the smallest-area rectangle enclosing a set of 2D points, the parameter domain of
+//! a spectral patch's height field (Pauly & Gross 2001, §3) and of a fitted spline surface
+//! (Greiner & Hormann 1997, §4).
+
+pub mod rect;
+
+pub use rect::{Rect, RectWorkspace, min_area_rect, min_area_rect_with};
