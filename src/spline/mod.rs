@@ -2,5 +2,10 @@
 //!
 //! (Module docs are written with the fitting code.)
 
+pub mod basis;
+pub mod fit;
 pub mod graph;
+pub mod hier;
 pub mod param;
+pub mod solve;
+pub mod tensor;

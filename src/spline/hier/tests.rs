@@ -1,0 +1,139 @@
+use super::*;
+use crate::spline::tensor;
+
+fn coefs(n: usize, seed: u64) -> Vec<[f64; 3]> {
+    let mut x = seed;
+    let mut next = || {
+        x = x
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (x >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+    };
+    (0..n).map(|_| [next(), next(), next()]).collect()
+}
+
+fn refined_example() -> Hierarchy {
+    let mut h = Hierarchy::new(0.5, [4, 3]);
+    let marks = [
+        Leaf {
+            level: 0,
+            cell: [1, 1],
+        },
+        Leaf {
+            level: 0,
+            cell: [3, 0],
+        },
+    ];
+    let (missed, changed) = h.refine(&marks, 5);
+    assert!(missed.is_empty() && changed);
+    let leaves = h.leaves();
+    let deep: Vec<Leaf> = leaves
+        .iter()
+        .filter(|l| l.level == 1)
+        .take(3)
+        .copied()
+        .collect();
+    h.refine(&deep, 5);
+    h
+}
+
+#[test]
+fn leaves_tile_the_domain_and_leaf_of_finds_them() {
+    let h = refined_example();
+    let area: f64 = h
+        .leaves()
+        .iter()
+        .map(|l| h.spacing(l.level as usize).powi(2))
+        .sum();
+    let size = h.size();
+    assert!((area - size[0] * size[1]).abs() < 1e-12);
+    for leaf in h.leaves() {
+        let s = h.spacing(leaf.level as usize);
+        let centre = [
+            (leaf.cell[0] as f64 + 0.5) * s,
+            (leaf.cell[1] as f64 + 0.5) * s,
+        ];
+        assert_eq!(h.leaf_of(centre), leaf);
+    }
+}
+
+#[test]
+fn refinement_adds_finer_functions_and_drops_covered_coarse_ones() {
+    let h0 = Hierarchy::new(0.5, [4, 3]);
+    assert_eq!(h0.per_level(), vec![7 * 6]);
+    let h = refined_example();
+    let per = h.per_level();
+    assert_eq!(per.len(), 3);
+    assert!(per[1] > 0 && per[2] > 0, "{per:?}");
+    // The full refinement of a level removes every coarse function whose support is covered.
+    let mut g = Hierarchy::new(0.5, [4, 4]);
+    let all: Vec<Leaf> = g.leaves();
+    g.refine(&all, 3);
+    assert_eq!(g.per_level(), vec![0, 11 * 11]);
+}
+
+#[test]
+fn tensor_export_equals_the_hierarchical_surface() {
+    for h in [Hierarchy::new(0.5, [4, 3]), refined_example()] {
+        let coef = coefs(h.len(), 7);
+        let t = h.to_tensor(&coef, [10.0, -2.0, 0.5]);
+        assert!(t.is_consistent());
+        let size = h.size();
+        let dom = t.domain();
+        assert_eq!(dom, [[0.0, size[0]], [0.0, size[1]]]);
+        for k in 0..400 {
+            let uv = [
+                size[0] * (k as f64 * 0.618_034).fract(),
+                size[1] * (k as f64 * 0.414_214).fract(),
+            ];
+            let a = h.eval(&coef, uv);
+            let b = tensor::eval(&t, uv);
+            let origin = [10.0, -2.0, 0.5];
+            for x in 0..3 {
+                assert!((a[0][x] + origin[x] - b[0][x]).abs() < 1e-12, "{uv:?}");
+                for d in 1..6 {
+                    assert!((a[d][x] - b[d][x]).abs() < 1e-9, "{uv:?} d{d}");
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn refined_space_contains_the_coarse_surface() {
+    // A coarse function whose support lies in the refined region is replaced by finer ones:
+    // the surface it made must still be representable. Check by expanding each dropped
+    // level-0 function through the refinement mask and evaluating both.
+    let coarse = Hierarchy::new(0.5, [4, 4]);
+    let coef = coefs(coarse.len(), 3);
+    let mut fine = coarse.clone();
+    let all = fine.leaves();
+    fine.refine(&all, 3);
+    // Level-1 coefficients: c1[2i+a, 2j+b] = Σ mask[a'] mask[b'] c0[i, j].
+    let mut c1 = vec![[0.0; 3]; fine.len()];
+    for (k, f) in coarse.active[0].iter().enumerate() {
+        for (a, wa) in MASK_FOR_TEST.iter().enumerate() {
+            for (b, wb) in MASK_FOR_TEST.iter().enumerate() {
+                let g = [2 * f[0] + a as i64, 2 * f[1] + b as i64];
+                if let Some(&idx) = fine.index[1].get(&g) {
+                    for x in 0..3 {
+                        c1[idx as usize][x] += wa * wb * coef[k][x];
+                    }
+                }
+            }
+        }
+    }
+    for k in 0..200 {
+        let uv = [
+            2.0 * (k as f64 * 0.618_034).fract(),
+            2.0 * (k as f64 * 0.414_214).fract(),
+        ];
+        let a = coarse.eval(&coef, uv)[0];
+        let b = fine.eval(&c1, uv)[0];
+        for x in 0..3 {
+            assert!((a[x] - b[x]).abs() < 1e-13);
+        }
+    }
+}
+
+const MASK_FOR_TEST: [f64; 5] = crate::spline::basis::MASK;
