@@ -186,6 +186,95 @@ pub enum Cmd {
     Resample(ResampleArgs),
     /// Write the patch layout, power spectra of sample patches and a summary (JSON).
     Spectrum(SpectrumArgs),
+    /// Fit hierarchical B-spline surfaces to scattered points (Greiner & Hormann 1997) and
+    /// write them as IGES (entity 128): one surface for a disc-like patch (a range scan, a
+    /// height field), one per tile for terrain (--tiles).
+    Fit(FitArgs),
+}
+
+/// `fit --fairness`.
+#[derive(ValueEnum, Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FairnessChoice {
+    /// Thin-plate energy in parameter space.
+    Simple,
+    /// Thin-plate energy in the metric of the previous iteration's surface.
+    Data,
+}
+
+/// `fit --param`.
+#[derive(ValueEnum, Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ParamChoice {
+    /// Projection onto the best-fit plane (height fields).
+    Project,
+    /// Spring model, uniform springs (α = 0, r = 0).
+    Uniform,
+    /// Spring model, chord-length springs (α = 0, r = 1).
+    Chord,
+    /// Spring model, real springs with rest lengths (α = 0.5, r = 1).
+    Spring,
+}
+
+/// `fit --refine`.
+#[derive(ValueEnum, Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RefineChoice {
+    /// Hierarchical: only around the points that miss the tolerance.
+    Local,
+    /// Halve the knot spacing everywhere (for comparison).
+    Global,
+}
+
+/// `scanflow fit`.
+#[derive(Args, Debug)]
+pub struct FitArgs {
+    /// Point files (PLY, LAS/LAZ, XYZ/PTS), or one store directory made by `ingest` (--tiles).
+    pub inputs: Vec<PathBuf>,
+    /// Output IGES file (.igs or .iges).
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Largest deviation of a point from its surface: in input units, or a percentage of the
+    /// bounding-box diagonal (`0.1%`).
+    #[arg(long)]
+    pub tolerance: String,
+    /// Interpolate every point (Lagrange multipliers) instead of approximating.
+    #[arg(long)]
+    pub interpolate: bool,
+    /// Fairness energy.
+    #[arg(long, value_enum, default_value_t = FairnessChoice::Simple)]
+    pub fairness: FairnessChoice,
+    /// Starting fairness weight ω (dimensionless; ×0.1 per iteration).
+    #[arg(long, default_value_t = 0.1)]
+    pub omega: f64,
+    /// Finest refinement level.
+    #[arg(long, default_value_t = 10)]
+    pub max_level: usize,
+    /// Parameterisation.
+    #[arg(long, value_enum, default_value_t = ParamChoice::Chord)]
+    pub param: ParamChoice,
+    /// Local (hierarchical) or global refinement.
+    #[arg(long, value_enum, default_value_t = RefineChoice::Local)]
+    pub refine: RefineChoice,
+    /// Terrain: fit tile by tile over the store's cells, parameterised by x and y; the tiles
+    /// are pieces of one spline, so neighbours meet with C2 continuity.
+    #[arg(long)]
+    pub tiles: bool,
+    /// Points a tile aims at (--tiles): the tile grid follows the point count, never --mem.
+    #[arg(long, default_value_t = scanflow::pipeline::fit_tiles::TILE_POINTS)]
+    pub tile_points: u64,
+    /// Write a tessellated preview mesh (binary PLY).
+    #[arg(long)]
+    pub preview: Option<PathBuf>,
+    /// Write the report (JSON).
+    #[arg(long)]
+    pub report: Option<PathBuf>,
+    /// Work directory for the ingested store (--tiles; default: OUTPUT.work).
+    #[arg(long)]
+    pub work_dir: Option<PathBuf>,
+    /// Keep the work directory after success.
+    #[arg(long)]
+    pub keep_work: bool,
+    /// Threads, memory, progress.
+    #[command(flatten)]
+    pub common: Common,
 }
 
 /// Inputs and options every spectral command shares.
@@ -551,5 +640,19 @@ mod tests {
             .unwrap_or_default();
         let cap = format!("up to {} times", scanflow::normals::MAX_K_FACTOR);
         assert!(help.contains(&cap), "{help}");
+    }
+}
+
+impl NormalOpts {
+    /// The defaults `--normals`, `--neighbours` and the rest take, for commands (`fit
+    /// --tiles`) that ingest without normal options of their own.
+    pub fn default_for_tiles() -> NormalOpts {
+        NormalOpts {
+            normals: NormalsChoice::Auto,
+            neighbours: scanflow::normals::DEFAULT_K,
+            fixed_neighbours: false,
+            robust_normals: false,
+            viewpoint: Vec::new(),
+        }
     }
 }

@@ -19,6 +19,7 @@ use super::args::{
     SynthArgs,
 };
 use super::paths;
+pub use super::fit::FitConfig;
 pub use super::spectral::SpectralConfig;
 
 /// zstd levels `--zstd-level` accepts: zstd's fast levels from -7 up to its level 19 (20 and
@@ -56,6 +57,8 @@ pub enum Config {
     Demo(DemoConfig),
     /// `scanflow filter`, `resample` and `spectrum`.
     Spectral(SpectralConfig),
+    /// `fit`.
+    Fit(FitConfig),
 }
 
 impl Config {
@@ -71,6 +74,7 @@ impl Config {
             Cmd::Filter(a) => Config::Spectral(SpectralConfig::filter(a)?),
             Cmd::Resample(a) => Config::Spectral(SpectralConfig::resample(a)?),
             Cmd::Spectrum(a) => Config::Spectral(SpectralConfig::spectrum(a)?),
+            Cmd::Fit(a) => Config::Fit(FitConfig::new(a)?),
         })
     }
 }

@@ -29,6 +29,8 @@ pub mod signals;
 
 mod check;
 mod demo;
+mod fit;
+mod fit_tiles;
 mod info;
 mod ingest;
 mod paths;
@@ -53,6 +55,7 @@ pub fn run(config: Config) -> Result<()> {
         Config::Info(c) => info::run(&c, &start(&c.run)?),
         Config::Demo(c) => demo::run(&c, &start(&c.run)?),
         Config::Spectral(c) => spectral::run(&c, &start(&c.run)?),
+        Config::Fit(c) => fit::run(&c, &start(&c.run)?),
     }
 }
 

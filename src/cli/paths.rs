@@ -13,18 +13,25 @@ pub const PLY: &str = "ply";
 
 /// Check that `path` (the value of `-o`) can receive a new file in the format of `ext`.
 pub fn output_file(path: &Path, ext: &str) -> Result<()> {
+    output_file_as("-o", path, &[ext], "binary PLY")
+}
+
+/// Check that `path` (the value of `opt`) can receive a new file named with one of `exts`,
+/// holding `format`.
+pub fn output_file_as(opt: &str, path: &Path, exts: &[&str], format: &str) -> Result<()> {
     let shown = path.display();
     if path.file_name().is_none() {
-        bail!("-o {shown}: expected a file name");
+        bail!("{opt} {shown}: expected a file name");
     }
     let got = path.extension().and_then(|e| e.to_str()).unwrap_or("");
-    if !got.eq_ignore_ascii_case(ext) {
+    if !exts.iter().any(|e| got.eq_ignore_ascii_case(e)) {
         bail!(
-            "-o {shown}: scanflow writes binary PLY; name the output *.{ext} (other formats are not written)"
+            "{opt} {shown}: scanflow writes {format} here; name it *.{} (other formats are not written)",
+            exts.join(" or *.")
         );
     }
     if path.is_dir() {
-        bail!("-o {shown}: is a directory; expected a file name");
+        bail!("{opt} {shown}: is a directory; expected a file name");
     }
     writable_parent(path)
 }

@@ -13,6 +13,8 @@
 
 mod details;
 mod global;
+pub mod fit;
+pub mod fit_tiles;
 pub mod ingest;
 mod points;
 pub mod reconstruct;

@@ -266,7 +266,7 @@ fn assemble_data(
 
 /// The 3 × 3 matrix `M` of the integrand `xᵀ M x` and the area element, for a reference
 /// tangent pair (module docs); the identity metric without a reference.
-fn metric(reference: Option<(&[f64; 3], &[f64; 3])>) -> ([[f64; 3]; 3], f64) {
+pub(crate) fn metric(reference: Option<(&[f64; 3], &[f64; 3])>) -> ([[f64; 3]; 3], f64) {
     let Some((su, sv)) = reference else {
         return ([[1.0, 0.0, 0.0], [0.0, 2.0, 0.0], [0.0, 0.0, 1.0]], 1.0);
     };

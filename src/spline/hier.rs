@@ -182,6 +182,50 @@ impl Hierarchy {
         self.active.iter().map(Vec::len).collect()
     }
 
+    /// The coefficients in the refined space `new` (whose regions contain this one's) of the
+    /// same surface: a function still selected keeps its coefficient; one that is not is
+    /// split by the refinement mask into the next level's, recursively (exact, since the
+    /// spaces are nested).
+    pub fn prolong(&self, coef: &[[f64; 3]], new: &Hierarchy) -> Vec<[f64; 3]> {
+        let mut out = vec![[0.0f64; 3]; new.len()];
+        for (idx, l, f) in self.functions() {
+            new.add_function(l, f, coef[idx as usize], &mut out);
+        }
+        out
+    }
+
+    fn add_function(&self, l: usize, f: [i64; 2], c: [f64; 3], out: &mut [[f64; 3]]) {
+        let n = self.cells(l);
+        if f[0] < -3 || f[1] < -3 || f[0] >= n[0] || f[1] >= n[1] {
+            return;
+        }
+        if let Some(&k) = self.index.get(l).and_then(|m| m.get(&f)) {
+            for x in 0..3 {
+                out[k as usize][x] += c[x];
+            }
+            return;
+        }
+        if l + 1 >= self.levels() {
+            return;
+        }
+        for (b, wb) in super::basis::MASK.iter().enumerate() {
+            for (a, wa) in super::basis::MASK.iter().enumerate() {
+                let g = [2 * f[0] + a as i64, 2 * f[1] + b as i64];
+                let w = wa * wb;
+                self.add_function(l + 1, g, [c[0] * w, c[1] * w, c[2] * w], out);
+            }
+        }
+    }
+
+    /// Every selected function as `(index, level, [i, j])`, in index order.
+    pub fn functions(&self) -> impl Iterator<Item = (u32, usize, [i64; 2])> + '_ {
+        self.active.iter().enumerate().flat_map(move |(l, act)| {
+            act.iter()
+                .enumerate()
+                .map(move |(k, &f)| ((self.offset[l] + k) as u32, l, f))
+        })
+    }
+
     /// Knot spacing of level `l`.
     pub fn spacing(&self, l: usize) -> f64 {
         self.h0 / f64::from(1u32 << l)
@@ -475,27 +519,46 @@ impl Hierarchy {
     }
 
     /// The surface as one tensor-product B-spline with clamped knots (module docs), its
-    /// control points `coef[k] + origin` and knots shifted by `uv0`.
+    /// control points `coef[k] + origin`.
     pub fn to_tensor(&self, coef: &[[f64; 3]], origin: [f64; 3]) -> TensorSurface {
+        self.to_tensor_rect(coef, origin, [0, 0], self.cells0)
+    }
+
+    /// The surface restricted to the rectangle of level-0 cells `[lo, hi)` as one clamped
+    /// tensor-product B-spline, parameters unchanged (its domain is `[lo h₀, hi h₀]`). The
+    /// pieces of neighbouring rectangles are the same spline, so they meet with the
+    /// spline's own continuity (C2 where no knot is repeated).
+    pub fn to_tensor_rect(
+        &self,
+        coef: &[[f64; 3]],
+        origin: [f64; 3],
+        lo: [i64; 2],
+        hi: [i64; 2],
+    ) -> TensorSurface {
         let fine = self.levels() - 1;
         let h = self.spacing(fine);
-        let ends = self.cells(fine);
-        // Knot vectors in units of the finest spacing.
+        let lo = [lo[0] << fine, lo[1] << fine];
+        let hi = [hi[0] << fine, hi[1] << fine];
+        // The functions nonzero inside the rectangle, in finest units.
+        let touches = |l: usize, f: &[i64; 2]| {
+            let s = fine - l;
+            (0..2).all(|d| (f[d] << s) < hi[d] && ((f[d] + 4) << s) > lo[d])
+        };
         let mut taus: [Vec<f64>; 2] = [Vec::new(), Vec::new()];
         for d in 0..2 {
             let mut set: BTreeSet<i64> = BTreeSet::new();
             for (l, act) in self.active.iter().enumerate() {
                 let shift = fine - l;
-                for f in act {
+                for f in act.iter().filter(|f| touches(l, f)) {
                     for k in 0..5 {
                         set.insert((f[d] + k) << shift);
                     }
                 }
             }
-            set.insert(0);
-            set.insert(ends[d]);
+            set.insert(lo[d]);
+            set.insert(hi[d]);
             let mut tau: Vec<f64> = set.into_iter().map(|k| k as f64).collect();
-            for end in [0.0, ends[d] as f64] {
+            for end in [lo[d] as f64, hi[d] as f64] {
                 let at = tau.partition_point(|&x| x < end);
                 tau.splice(at..at, [end, end]);
             }
@@ -507,6 +570,9 @@ impl Hierarchy {
         for (l, act) in self.active.iter().enumerate() {
             let shift = fine - l;
             for (k, f) in act.iter().enumerate() {
+                if !touches(l, f) {
+                    continue;
+                }
                 let c = coef[self.offset[l] + k];
                 let mut alpha = |d: usize| {
                     cache[d]
@@ -532,19 +598,19 @@ impl Hierarchy {
                 }
             }
         }
-        // Clamp: keep the functions from the one with three knots at 0 to the one with three
-        // knots at the far end.
+        // Clamp: keep the functions from the one with three knots at the low end to the one
+        // with three knots at the high end.
         let mut keep = [(0, 0); 2];
         let mut knots: [Vec<f64>; 2] = [Vec::new(), Vec::new()];
         for d in 0..2 {
             let tau = &taus[d];
-            let p0 = tau.partition_point(|&x| x < 0.0);
-            let q0 = tau.partition_point(|&x| x < ends[d] as f64);
+            let p0 = tau.partition_point(|&x| x < lo[d] as f64);
+            let q0 = tau.partition_point(|&x| x < hi[d] as f64);
             keep[d] = (p0 - 1, q0 - 1);
             let mut k = Vec::with_capacity(q0 - p0 + 5);
-            k.push(0.0);
+            k.push(lo[d] as f64 * h);
             k.extend(tau[p0..q0 + 3].iter().map(|&x| x * h));
-            k.push(ends[d] as f64 * h);
+            k.push(hi[d] as f64 * h);
             knots[d] = k;
         }
         let count = [keep[0].1 - keep[0].0 + 1, keep[1].1 - keep[1].0 + 1];

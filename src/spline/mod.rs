@@ -3,6 +3,7 @@
 //! (Module docs are written with the fitting code.)
 
 pub mod basis;
+pub mod block;
 pub mod fit;
 pub mod graph;
 pub mod hier;

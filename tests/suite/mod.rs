@@ -6,6 +6,7 @@ mod colour;
 mod common;
 mod corpus;
 mod data;
+mod fit;
 mod degenerate;
 mod ingest;
 mod input_kinds;

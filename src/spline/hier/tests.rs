@@ -137,3 +137,45 @@ fn refined_space_contains_the_coarse_surface() {
 }
 
 const MASK_FOR_TEST: [f64; 5] = crate::spline::basis::MASK;
+
+#[test]
+fn pieces_of_neighbouring_rectangles_are_the_same_spline() {
+    let h = refined_example();
+    let coef = coefs(h.len(), 11);
+    let left = h.to_tensor_rect(&coef, [0.0; 3], [0, 0], [2, 3]);
+    let right = h.to_tensor_rect(&coef, [0.0; 3], [2, 0], [4, 3]);
+    assert!(left.is_consistent() && right.is_consistent());
+    assert_eq!(left.domain()[0], [0.0, 1.0]);
+    assert_eq!(right.domain()[0], [1.0, 2.0]);
+    for k in 0..100 {
+        let v = 1.5 * k as f64 / 99.0;
+        let a = tensor::eval(&left, [1.0, v]);
+        let b = tensor::eval(&right, [1.0, v]);
+        let c = h.eval(&coef, [1.0, v]);
+        for x in 0..3 {
+            // Value, first and second derivatives across the seam agree: C2.
+            for d in 0..6 {
+                assert!((a[d][x] - b[d][x]).abs() < 1e-9, "d{d} at v={v}");
+            }
+            assert!((a[0][x] - c[0][x]).abs() < 1e-12);
+        }
+    }
+}
+
+#[test]
+fn prolongation_keeps_the_surface_exactly() {
+    let coarse = refined_example();
+    let coef = coefs(coarse.len(), 5);
+    let mut fine = coarse.clone();
+    let leaves: Vec<Leaf> = fine.leaves().into_iter().step_by(3).collect();
+    fine.refine(&leaves, 6);
+    let c2 = coarse.prolong(&coef, &fine);
+    for k in 0..300 {
+        let uv = [2.0 * (k as f64 * 0.618_034).fract(), 1.5 * (k as f64 * 0.414_214).fract()];
+        let a = coarse.eval(&coef, uv)[0];
+        let b = fine.eval(&c2, uv)[0];
+        for x in 0..3 {
+            assert!((a[x] - b[x]).abs() < 1e-12, "{uv:?}");
+        }
+    }
+}
