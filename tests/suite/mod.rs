@@ -7,6 +7,7 @@ mod common;
 mod corpus;
 mod data;
 mod degenerate;
+mod iges;
 mod ingest;
 mod input_kinds;
 mod normals;
