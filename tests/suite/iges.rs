@@ -146,6 +146,7 @@ fn opencascade_and_gmsh_read_back_what_scanflow_writes() {
     assert_eq!(r["surfaces"], 2, "{r}");
     assert_eq!(r["points"].as_u64(), Some(expect.len() as u64));
     assert_eq!(r["no_projection"], 0, "{r}");
+    assert_eq!(r["boundary_nearest"], 0, "{r}");
     let got = |k: &str| r[k].as_f64().unwrap();
     assert!((got("max") - 0.04).abs() < 1e-9, "max {}", got("max"));
     assert!(
@@ -218,7 +219,8 @@ fn unit_flag_decides_opencascade_scaling_and_millimetres_scale_nothing() {
     }
     let dir = tempfile::tempdir().unwrap();
     let pts = dir.path().join("one.xyz");
-    std::fs::write(&pts, "0.5 10.5 0.5\n").unwrap();
+    // Beyond the edge u = 1, the curve (2, 10 + v, 2v): nearest at v = 0.5, 0.5 away.
+    std::fs::write(&pts, "2.5 10.5 1.0\n").unwrap();
     let s = saddle(10.0);
     let corner = s.ctrl[15][0];
     for (unit, scale) in [
@@ -231,6 +233,11 @@ fn unit_flag_decides_opencascade_scaling_and_millimetres_scale_nothing() {
         meta.unit = unit;
         write_iges(&iges, std::slice::from_ref(&s), &meta).unwrap();
         let r = check(&iges, &pts);
+        if unit == IgesUnit::Millimetre {
+            assert_eq!(r["boundary_nearest"], 1, "{r}");
+            let max = r["max"].as_f64().unwrap();
+            assert!((max - 0.5).abs() < 1e-6, "beyond the edge: {max}");
+        }
         let got = r["occ_bspline"][0]["poles"][3][3][0].as_f64().unwrap();
         assert!(
             (got - corner * scale).abs() < 1e-9 * scale,
