@@ -35,9 +35,10 @@
 //!
 //! # Numbers
 //!
-//! Integers in decimal; reals in Rust's shortest round-trip form, always with a decimal point
-//! and with an `E` exponent beyond 1e16 or below 1e-5 (`0.1`, `-3.0`, `1.5E-7`), so a reader
-//! parsing a double gets the same bits back. A number never spans two lines.
+//! Integers in decimal; reals in Rust's shortest round-trip form, always with a decimal point,
+//! with an `E` exponent for very large and very small magnitudes (`0.1`, `-3.0`, `1.5E-7`,
+//! `1.0E20`), so a reader that parses a double correctly gets the same bits back (OpenCascade's
+//! own parser is off by one unit in the last place on some numbers). A number never spans two lines.
 //!
 //! # Units
 //!
@@ -149,9 +150,9 @@ pub struct IgesStats {
     pub bytes: u64,
 }
 
-/// Write `surfaces` to `path` as IGES 5.3 (see the [module docs](self)), atomically. An
-/// inconsistent surface or a non-finite number is an error naming the file, the surface
-/// and the value, and nothing is written.
+/// Write `surfaces` to `path` as IGES 5.3 (see the [module docs](self)), atomically. No
+/// surface, an inconsistent surface, an empty domain or a non-finite number is an error naming
+/// the file, the surface and the value, and nothing is written.
 pub fn write_iges(path: &Path, surfaces: &[TensorSurface], meta: &IgesMeta) -> Result<IgesStats> {
     let (bytes, mut stats) = build(surfaces, meta).map_err(|m| Error::input(path, m))?;
     stats.bytes = bytes.len() as u64;
@@ -371,6 +372,9 @@ fn build(
     surfaces: &[TensorSurface],
     meta: &IgesMeta,
 ) -> std::result::Result<(Vec<u8>, IgesStats), String> {
+    if surfaces.is_empty() {
+        return Err("no surface to write".into());
+    }
     if let Some(m) = surfaces
         .iter()
         .enumerate()
@@ -695,6 +699,8 @@ mod tests {
         short.knots[1].pop();
         let e = write_iges(&path, &[short], &meta).unwrap_err().to_string();
         assert!(e.contains("surface 0: inconsistent"), "{e}");
+        let e = write_iges(&path, &[], &meta).unwrap_err().to_string();
+        assert!(e.contains("no surface"), "{e}");
         assert!(!path.exists());
         let stats = write_iges(&path, &[surface(0.0)], &meta).unwrap();
         let bytes = std::fs::read(&path).unwrap();
