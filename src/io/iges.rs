@@ -6,8 +6,8 @@
 //! columns 74–80 the line's sequence number within its section (1-based, right-justified).
 //! The sections, in order:
 //!
-//! * **S**, Start: free text for a human reader;
-//! * **G**, Global (§2.2.4): 26 parameters separated by `,` and ended by `;`: delimiters,
+//! * **S**, Start (§2.2.4.2): free text for a human reader;
+//! * **G**, Global (§2.2.4.3): 26 parameters separated by `,` and ended by `;`: delimiters,
 //!   product and file names, the sending system, number precision, model space scale (1),
 //!   units flag and name, line weights, the file's date, the minimum resolution, the maximum
 //!   coordinate, author and organisation, the version (11 = 5.3), drafting standard (0) and
@@ -18,9 +18,9 @@
 //!   transformation matrix, label display (all 0), status `00000000` (visible, independent,
 //!   geometry), then type again, line weight, colour, its count of P lines, form (0), two
 //!   reserved fields, label and subscript;
-//! * **P**, Parameter Data: columns 1–64 the entity's parameters (same delimiters), column
-//!   66–72 the back pointer to its first D line;
-//! * **T**, Terminate: the count of lines of each section above.
+//! * **P**, Parameter Data (§2.2.4.5): columns 1–64 the entity's parameters (same
+//!   delimiters), columns 66–72 the back pointer to its first D line;
+//! * **T**, Terminate (§2.2.4.6): the count of lines of each section above.
 //!
 //! # Entity 128, rational B-spline surface (IGES 5.3, §4.24)
 //!

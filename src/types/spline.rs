@@ -103,8 +103,8 @@ impl TensorSurface {
     }
 
     /// `[S, ∂S/∂u, ∂S/∂v]` at `(u, v)` (clamped to the domain), by the basis and its first
-    /// derivatives along each direction ([The NURBS Book](basis), A2.2 and the derivative
-    /// recursion) summed over the `(degree[0] + 1) × (degree[1] + 1)` control points whose
+    /// derivatives along each direction (Piegl & Tiller, *The NURBS Book*, A2.2 and the
+    /// derivative recursion) summed over the `(degree[0] + 1) × (degree[1] + 1)` control points whose
     /// functions do not vanish there. At a knot the derivative is the one of the span to its
     /// right (of the last span at the domain's end). Any degree ≥ 1, clamped or not.
     /// Requires [`TensorSurface::is_consistent`].
