@@ -25,7 +25,9 @@
 //!
 //! * [`ply_write`]: point PLY ([`ply_write::PointPlyWriter`]);
 //! * [`mesh_write`]: the streamed mesh PLY of ARCHITECTURE.md step 5
-//!   ([`mesh_write::MeshPlyWriter`]).
+//!   ([`mesh_write::MeshPlyWriter`]);
+//! * [`iges`]: tensor-product B-spline surfaces as IGES 5.3 entity 128
+//!   ([`iges::write_iges`]; whole files, small next to the points they were fitted to).
 //!
 //! The atomic writer, [`atomic`], is the one way any output appears under its final name:
 //! written under `NAME.tmp-<pid>`, synced, renamed, the directory synced; removed when dropped

@@ -8,6 +8,7 @@ mod corpus;
 mod data;
 mod fit;
 mod degenerate;
+mod iges;
 mod ingest;
 mod input_kinds;
 mod normals;
