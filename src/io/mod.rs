@@ -16,8 +16,8 @@
 //! * [`las`]: LAS and LAZ;
 //! * [`xyz`]: XYZ / PTS text (`text.rs` the layouts, tokenizer and line walk, `decode.rs` the
 //!   values);
-//! * [`mesh_read`]: PLY meshes, vertices through [`ply`] and the `face` element (`faces.rs`),
-//!   for `scanflow check` and tests;
+//! * [`mesh_read`]: PLY meshes, vertices through [`ply`] and the `face` element (`faces.rs`)
+//!   or a scan's `range_grid` (`range_grid.rs`), for `scanflow check`, `fit` and tests;
 //! * [`conf`]: the `.conf` scan list (files and their rigid transforms);
 //! * [`mmap`]: the memory-mapped window every binary and text reader reads through.
 //!

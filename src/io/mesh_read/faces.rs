@@ -15,16 +15,32 @@ pub(super) enum FaceProp {
     List { count: Scalar, item: Scalar },
 }
 
-/// The face element's properties and which one holds the corner indices.
+/// The face element's (or another element of index lists') properties and which one holds
+/// the corner indices.
 #[derive(Debug)]
 pub(super) struct FaceLayout {
     pub(super) props: Vec<FaceProp>,
     /// Position of the index list in `props`.
     pub(super) indices: usize,
+    /// What one record is called in messages ("face", "range_grid entry").
+    pub(super) noun: &'static str,
+    /// The plural of `noun`.
+    pub(super) plural: &'static str,
 }
 
 impl FaceLayout {
+    /// The layout of the `face` element.
     pub(super) fn new(path: &Path, face: &Element) -> Result<FaceLayout> {
+        FaceLayout::of(path, face, "face", "faces")
+    }
+
+    /// The layout of element `face`, whose records are called `noun` (`plural`) in messages.
+    pub(super) fn of(
+        path: &Path,
+        face: &Element,
+        noun: &'static str,
+        plural: &'static str,
+    ) -> Result<FaceLayout> {
         let find = |want: &str| {
             face.props
                 .iter()
@@ -42,7 +58,8 @@ impl FaceLayout {
                 path,
                 Location::Line(face.line),
                 format!(
-                    "the face element has no list property \"vertex_indices\" or \"vertex_index\" (found: {})",
+                    "the {} element has no list property \"vertex_indices\" or \"vertex_index\" (found: {})",
+                    face.name,
                     if names.is_empty() {
                         "no property".to_string()
                     } else {
@@ -68,10 +85,33 @@ impl FaceLayout {
             return Err(Error::format(
                 path,
                 Location::Line(face.line),
-                format!("face vertex indices are declared {item:?}, expected an integer type"),
+                format!("{noun} vertex indices are declared {item:?}, expected an integer type"),
             ));
         }
-        Ok(FaceLayout { props, indices })
+        Ok(FaceLayout {
+            props,
+            indices,
+            noun,
+            plural,
+        })
+    }
+}
+
+/// Receives the index lists of an element's records: [`ListSink::corner`] for each index of
+/// record `rec`, then [`ListSink::finish`]; errors are messages without location.
+pub(super) trait ListSink {
+    /// One index (as read) of record `rec`.
+    fn corner(&mut self, rec: u64, v: f64) -> std::result::Result<(), String>;
+    /// The end of record `rec`.
+    fn finish(&mut self, rec: u64) -> std::result::Result<(), String>;
+}
+
+impl ListSink for FaceSink {
+    fn corner(&mut self, rec: u64, v: f64) -> std::result::Result<(), String> {
+        FaceSink::corner(self, rec, v)
+    }
+    fn finish(&mut self, rec: u64) -> std::result::Result<(), String> {
+        FaceSink::finish(self, rec)
     }
 }
 
@@ -257,7 +297,7 @@ pub(super) fn read_binary_faces(
     layout: &FaceLayout,
     count: u64,
     be: bool,
-    faces: &mut FaceSink,
+    faces: &mut impl ListSink,
 ) -> Result<()> {
     for face in 0..count {
         let start = src.pos;
@@ -266,8 +306,8 @@ pub(super) fn read_binary_faces(
                 src.path,
                 Location::Byte(start),
                 format!(
-                    "truncated: the header promises {count} faces, but the file ends at byte {} inside face {face}",
-                    src.file_len
+                    "truncated: the header promises {count} {}, but the file ends at byte {} inside {} {face}",
+                    layout.plural, src.file_len, layout.noun
                 ),
             )
         };
@@ -288,7 +328,7 @@ pub(super) fn read_binary_faces(
                         return Err(Error::format(
                             src.path,
                             Location::Byte(start),
-                            format!("face {face} has a negative list length {n}"),
+                            format!("{} {face} has a negative list length {n}", layout.noun),
                         ));
                     }
                     let n = n as u64;
@@ -322,7 +362,7 @@ pub(super) fn read_ascii_faces(
     layout: &FaceLayout,
     count: u64,
     mut line: u64,
-    faces: &mut FaceSink,
+    faces: &mut impl ListSink,
 ) -> Result<()> {
     let mut text = Vec::new();
     for face in 0..count {
@@ -332,7 +372,8 @@ pub(super) fn read_ascii_faces(
                 src.path,
                 Location::Line(line),
                 format!(
-                    "truncated: the header promises {count} faces, but the file ends after {face} of them"
+                    "truncated: the header promises {count} {}, but the file ends after {face} of them",
+                    layout.plural
                 ),
             ));
         }
@@ -344,7 +385,8 @@ pub(super) fn read_ascii_faces(
         let int = |t: Option<&[u8]>, what: &str| -> Result<i64> {
             let Some(t) = t else {
                 return Err(bad(format!(
-                    "face {face}: the line ends where {what} was expected"
+                    "{} {face}: the line ends where {what} was expected",
+                    layout.noun
                 )));
             };
             std::str::from_utf8(t)
@@ -352,7 +394,8 @@ pub(super) fn read_ascii_faces(
                 .and_then(|s| s.parse::<i64>().ok())
                 .ok_or_else(|| {
                     bad(format!(
-                        "face {face}: {what} \"{}\" is not an integer",
+                        "{} {face}: {what} \"{}\" is not an integer",
+                        layout.noun,
                         String::from_utf8_lossy(t)
                     ))
                 })
@@ -363,7 +406,8 @@ pub(super) fn read_ascii_faces(
                     // Skipped unparsed, but it must be there.
                     if toks.next().is_none() {
                         return Err(bad(format!(
-                            "face {face}: the line ends where property {} was expected",
+                            "{} {face}: the line ends where property {} was expected",
+                            layout.noun,
                             k + 1
                         )));
                     }
@@ -371,7 +415,10 @@ pub(super) fn read_ascii_faces(
                 FaceProp::List { .. } => {
                     let n = int(toks.next(), "a list length")?;
                     if n < 0 {
-                        return Err(bad(format!("face {face} has a negative list length {n}")));
+                        return Err(bad(format!(
+                            "{} {face} has a negative list length {n}",
+                            layout.noun
+                        )));
                     }
                     if k == layout.indices {
                         for _ in 0..n {
@@ -382,7 +429,8 @@ pub(super) fn read_ascii_faces(
                         for _ in 0..n {
                             if toks.next().is_none() {
                                 return Err(bad(format!(
-                                    "face {face}: the line ends inside the list of property {}",
+                                    "{} {face}: the line ends inside the list of property {}",
+                                    layout.noun,
                                     k + 1
                                 )));
                             }
@@ -393,7 +441,8 @@ pub(super) fn read_ascii_faces(
         }
         if toks.next().is_some() {
             return Err(bad(format!(
-                "face {face}: the line has more values than the face properties declare"
+                "{} {face}: the line has more values than its properties declare",
+                layout.noun
             )));
         }
         faces.finish(face).map_err(bad)?;

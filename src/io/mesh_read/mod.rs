@@ -1,4 +1,11 @@
-//! PLY mesh reader: vertices and triangulated faces, for `scanflow check` and tests.
+//! PLY mesh reader: vertices and triangulated faces, for `scanflow check`, the spline stage's
+//! parameterisation graph and tests.
+//!
+//! [`read_mesh`] wants a `face` element; [`read_scan_mesh`] takes the triangles of a scan from
+//! its `face` element, else from its `range_grid` element (Stanford range scans, triangulated
+//! by `range_grid.rs`), else gives none. The `range_grid` entries are read by the same record
+//! readers as faces (`faces.rs`, through its `ListSink`), so their errors name the entry and
+//! its byte or line the same way.
 //!
 //! Vertices come through [`PlyReader`] (any property order and scalar type, ascii or binary
 //! of either endianness). Faces come from the `face` element's list property
@@ -15,9 +22,11 @@
 //! The whole mesh is held in memory (24 bytes a vertex, 12 a triangle); the file is streamed
 //! through a buffered reader.
 //!
-//! `faces.rs` reads the `face` element; this file reads the vertices and drives it.
+//! `faces.rs` reads the `face` element (and any element of index lists), `range_grid.rs`
+//! triangulates a range grid; this file reads the vertices and drives them.
 
 mod faces;
+mod range_grid;
 
 use std::fs::File;
 use std::io::{BufReader, Read};
@@ -25,10 +34,11 @@ use std::path::Path;
 
 use crate::error::{Error, IoContext, Location, Result};
 use crate::io::PointReader;
-use crate::io::ply::{Encoding, PlyReader, parse_header};
+use crate::io::ply::{Encoding, PlyHeader, PlyReader, parse_header};
 use crate::types::PointBatch;
 use faces::{
-    FaceLayout, FaceSink, Source, read_ascii_faces, read_binary_faces, skip_binary_element,
+    FaceLayout, FaceSink, ListSink, Source, read_ascii_faces, read_binary_faces,
+    skip_binary_element,
 };
 
 /// A triangle mesh: positions and vertex-index triples, wound as stored.
@@ -87,15 +97,26 @@ pub fn ply_face_count(path: &Path) -> Result<Option<u64>> {
 /// non-negative and below the vertex count, and every face must have at least 3 corners.
 pub fn read_mesh(path: &Path) -> Result<Mesh> {
     let reader = PlyReader::open(path)?;
-    let header = reader.header().clone();
-    let Some(face_at) = header.elements.iter().position(|e| e.name == "face") else {
+    if !reader.header().elements.iter().any(|e| e.name == "face") {
         return Err(Error::input(
             path,
             "has no faces: expected a mesh (the PLY header declares no \"face\" element)",
         ));
-    };
-    let face = &header.elements[face_at];
-    let layout = FaceLayout::new(path, face)?;
+    }
+    read_scan_mesh_from(path, reader)
+}
+
+/// Read a scan's PLY as a mesh: its vertices, and triangles from its `face` element when it
+/// has one (as [`read_mesh`]), else from its `range_grid` element (Stanford range scans, see
+/// `range_grid.rs`: two triangles per 2×2 block of present pixels, one where three are
+/// present), else none.
+pub fn read_scan_mesh(path: &Path) -> Result<Mesh> {
+    read_scan_mesh_from(path, PlyReader::open(path)?)
+}
+
+/// [`read_scan_mesh`] on an opened reader.
+fn read_scan_mesh_from(path: &Path, reader: PlyReader) -> Result<Mesh> {
+    let header = reader.header().clone();
     let n_vertices = reader.len();
     if n_vertices > u64::from(u32::MAX) + 1 {
         return Err(Error::input(
@@ -105,6 +126,26 @@ pub fn read_mesh(path: &Path) -> Result<Mesh> {
             ),
         ));
     }
+    let face_at = header.elements.iter().position(|e| e.name == "face");
+    let grid_at = header.elements.iter().position(|e| e.name == "range_grid");
+    // Check the element's layout before reading the vertices.
+    let layout = match (face_at, grid_at) {
+        (Some(at), _) => Some((at, FaceLayout::new(path, &header.elements[at])?)),
+        (None, Some(at)) => Some((
+            at,
+            FaceLayout::of(
+                path,
+                &header.elements[at],
+                "range_grid entry",
+                "range_grid entries",
+            )?,
+        )),
+        (None, None) => None,
+    };
+    let grid = match (face_at, grid_at) {
+        (None, Some(at)) => Some(range_grid::grid_size(path, &header.elements[at])?),
+        _ => None,
+    };
 
     let mut vertices = Vec::with_capacity(n_vertices as usize);
     let mut batch = PointBatch::default();
@@ -115,7 +156,44 @@ pub fn read_mesh(path: &Path) -> Result<Mesh> {
     }
     drop(batch);
     drop(reader);
+    let Some((at, layout)) = layout else {
+        return Ok(Mesh {
+            vertices,
+            triangles: Vec::new(),
+        });
+    };
+    let count = header.elements[at].count;
+    let triangles = match grid {
+        None => {
+            let mut faces = FaceSink {
+                n_vertices,
+                triangles: Vec::new(),
+                polygon: Vec::new(),
+            };
+            read_lists(path, &header, at, &layout, &mut faces)?;
+            faces.triangles
+        }
+        Some(size) => {
+            let mut pixels = range_grid::PixelSink::new(n_vertices, count);
+            read_lists(path, &header, at, &layout, &mut pixels)?;
+            range_grid::triangulate(size, &pixels.pixels, &vertices)
+        }
+    };
+    Ok(Mesh {
+        vertices,
+        triangles,
+    })
+}
 
+/// Read the index lists of element `at` of `header` into `sink`.
+fn read_lists(
+    path: &Path,
+    header: &PlyHeader,
+    at: usize,
+    layout: &FaceLayout,
+    sink: &mut impl ListSink,
+) -> Result<()> {
+    let el = &header.elements[at];
     let file = File::open(path).with_path(path)?;
     let file_len = file.metadata().with_path(path)?.len();
     let mut src = Source {
@@ -125,15 +203,9 @@ pub fn read_mesh(path: &Path) -> Result<Mesh> {
         file_len,
     };
     src.seek(header.data_start)?;
-    let mut faces = FaceSink {
-        n_vertices,
-        // Every record takes at least 2 bytes, so this never reserves more than the file holds.
-        triangles: Vec::with_capacity(face.count.min(file_len / 2) as usize),
-        polygon: Vec::new(),
-    };
     match header.encoding {
         Encoding::Ascii => {
-            let skip = header.elements[..face_at]
+            let skip = header.elements[..at]
                 .iter()
                 .fold(0u64, |s, e| s.saturating_add(e.count));
             let mut line = header.lines;
@@ -143,28 +215,25 @@ pub fn read_mesh(path: &Path) -> Result<Mesh> {
                         path,
                         Location::Line(line + 1),
                         format!(
-                            "truncated: the file ends after {} data lines, before the {} \"face\" lines the header promises",
+                            "truncated: the file ends after {} data lines, before the {} \"{}\" lines the header promises",
                             line - header.lines,
-                            face.count
+                            el.count,
+                            el.name
                         ),
                     ));
                 }
                 line += 1;
             }
-            read_ascii_faces(&mut src, &layout, face.count, line, &mut faces)?;
+            read_ascii_faces(&mut src, layout, el.count, line, sink)
         }
         Encoding::BinaryLe | Encoding::BinaryBe => {
             let be = header.encoding == Encoding::BinaryBe;
-            for el in &header.elements[..face_at] {
-                skip_binary_element(&mut src, el, be)?;
+            for e in &header.elements[..at] {
+                skip_binary_element(&mut src, e, be)?;
             }
-            read_binary_faces(&mut src, &layout, face.count, be, &mut faces)?;
+            read_binary_faces(&mut src, layout, el.count, be, sink)
         }
     }
-    Ok(Mesh {
-        vertices,
-        triangles: faces.triangles,
-    })
 }
 
 #[cfg(test)]
@@ -449,5 +518,116 @@ mod tests {
         let m = read_mesh(&p).unwrap();
         assert_eq!((m.vertices.len(), m.triangles.len()), (85_849, 166_259));
         assert_eq!(m.check_indices(), None);
+    }
+
+    /// Directed edges used twice: 0 for a consistently wound manifold triangulation.
+    fn repeated_directed_edges(t: &[[u32; 3]]) -> usize {
+        let mut e: Vec<(u32, u32)> = t
+            .iter()
+            .flat_map(|t| [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])])
+            .collect();
+        e.sort_unstable();
+        e.windows(2).filter(|w| w[0] == w[1]).count()
+    }
+
+    /// A 3 × 3 range grid with the centre-right pixel empty, ascii.
+    const GRID: &str = "ply\nformat ascii 1.0\nobj_info num_cols 3\nobj_info num_rows 3\nelement vertex 8\nproperty float x\nproperty float y\nproperty float z\nelement range_grid 9\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n2 0 0\n0 -1 0\n1 -1 0\n0 -2 0\n1 -2 0\n2 -2 0\n1 0\n1 1\n1 2\n1 3\n1 4\n0\n1 5\n1 6\n1 7\n";
+
+    #[test]
+    fn range_grid_is_triangulated_with_one_winding() {
+        let d = tempfile::tempdir().unwrap();
+        let p = write(d.path(), "g.ply", GRID.as_bytes());
+        let m = read_scan_mesh(&p).unwrap();
+        assert_eq!(m.vertices.len(), 8);
+        assert_eq!(m.triangles.len(), 6);
+        assert_eq!(repeated_directed_edges(&m.triangles), 0);
+        for t in &m.triangles {
+            let [a, b, c] = t.map(|v| m.vertices[v as usize]);
+            let area = (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]);
+            // Clockwise in the image, rows going down in y.
+            assert!(area < 0.0, "{t:?}");
+        }
+        // read_mesh still wants faces; a point file gives no triangles.
+        assert!(err(&p).contains("has no faces"));
+        let pts = GRID.replace(
+            "element range_grid 9\nproperty list uchar int vertex_indices\n",
+            "",
+        );
+        let pts = &pts[..pts.find("1 0\n1 1").unwrap()];
+        let q = write(d.path(), "p.ply", pts.as_bytes());
+        let m = read_scan_mesh(&q).unwrap();
+        assert_eq!((m.vertices.len(), m.triangles.len()), (8, 0));
+        // With a face element, the faces win.
+        let m = read_scan_mesh(&write(d.path(), "q.ply", ASCII.as_bytes())).unwrap();
+        assert_eq!(m.triangles.len(), 3);
+    }
+
+    #[test]
+    fn bad_range_grids_name_file_and_place() {
+        let d = tempfile::tempdir().unwrap();
+        let cases: &[(&str, &str, &str)] = &[
+            (
+                "\n1 4\n0\n",
+                "\n2 4 1\n0\n",
+                "line 24: range_grid entry 4 lists more than one",
+            ),
+            (
+                "\n1 4\n0\n",
+                "\n1 9\n0\n",
+                "line 24: range_grid entry 4: vertex index 9 is out of range",
+            ),
+            (
+                "obj_info num_cols 3\n",
+                "obj_info num_cols 4\n",
+                "line 9: range_grid has 9 entries, but num_cols 4",
+            ),
+            (
+                "obj_info num_rows 3\n",
+                "",
+                "line 8: the range_grid element needs the header lines",
+            ),
+            (
+                "obj_info num_rows 3\n",
+                "obj_info num_rows x\n",
+                "line 4: obj_info num_rows \"x\" is not a count",
+            ),
+            (
+                "1 6\n1 7\n",
+                "1 6\n",
+                "truncated: the header promises 9 range_grid entries",
+            ),
+        ];
+        for (from, to, want) in cases {
+            assert!(GRID.contains(from), "{from:?}");
+            let p = write(d.path(), "r.ply", GRID.replacen(from, to, 1).as_bytes());
+            let e = match read_scan_mesh(&p) {
+                Ok(m) => panic!("{to:?} read: {m:?}"),
+                Err(e) => e.to_string(),
+            };
+            assert!(e.contains("r.ply") && e.contains(want), "{to:?}: {e}");
+        }
+    }
+
+    #[test]
+    fn bunny_range_scan_triangulated_from_its_range_grid() {
+        let Some(p) = shared("../shared/data/bunny/bun000.ply") else {
+            return;
+        };
+        let m = read_scan_mesh(&p).unwrap();
+        assert_eq!(m.vertices.len(), 40_256);
+        assert_eq!(m.check_indices(), None);
+        assert_eq!(repeated_directed_edges(&m.triangles), 0);
+        // Which way the triangles face: towards +z, the side the scan bulges to, for all but a few.
+        let up = m
+            .triangles
+            .iter()
+            .filter(|t| {
+                let [a, b, c] = t.map(|v| m.vertices[v as usize]);
+                (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]) > 0.0
+            })
+            .count();
+        eprintln!("bun000: {} triangles, {up} facing +z", m.triangles.len());
+        assert_eq!(m.triangles.len(), 79_312);
+        assert_eq!(up, 79_312 - 76);
     }
 }
