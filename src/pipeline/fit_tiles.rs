@@ -145,8 +145,8 @@ fn bucket(store: &Store, tl: &Tiling, dir: &Path, ctx: &Ctx) -> Result<Vec<[u64;
     let mut counts = vec![[0u64; 2]; nt];
     let stage = ctx
         .progress
-        .stage("bucket", Some(store.cells().len() as u64), "cells");
-    for i in 0..store.cells().len() {
+        .stage("bucket", Some(store.manifest.cells.len() as u64), "cells");
+    for i in 0..store.manifest.cells.len() {
         let batch = store.read_cell(i)?;
         for p in &batch.pos {
             let q = [
@@ -233,16 +233,16 @@ pub fn fit_tiles(store: &Store, work: &Path, job: &FitJob, ctx: &Ctx) -> Result<
     let t0 = Instant::now();
     let mut b = Aabb::EMPTY;
     let mut n = 0u64;
-    for c in store.cells() {
+    for c in &store.manifest.cells {
         b = b.union(&c.bounds);
         n += c.count;
     }
     if n < 3 {
-        return Err(Error::input(store.dir(), format!("{n} points: a surface needs at least 3")));
+        return Err(Error::input(&store.dir, format!("{n} points: a surface needs at least 3")));
     }
     if !(b.max[0] > b.min[0] && b.max[1] > b.min[1]) {
         return Err(Error::input(
-            store.dir(),
+            &store.dir,
             "the points span no area in x and y: terrain tiles are parameterised by x and y",
         ));
     }
@@ -294,7 +294,7 @@ pub fn fit_tiles(store: &Store, work: &Path, job: &FitJob, ctx: &Ctx) -> Result<
                         rpiece.as_ref(),
                     )
                 })
-                .map_err(|e| Error::input(store.dir(), e.to_string()))?;
+                .map_err(|e| Error::input(&store.dir, e.to_string()))?;
                 stage.inc(1);
             }
         }

@@ -10,7 +10,7 @@ use scanflow::io::iges::{IgesMeta, IgesUnit, write_iges};
 use scanflow::types::TensorSurface;
 
 /// Whether python3 can import the checker's modules; prints why the caller skips otherwise.
-fn has_checker(test: &str) -> bool {
+pub(super) fn has_checker(test: &str) -> bool {
     let found = Command::new("python3")
         .args(["-c", "import OCP, gmsh, numpy"])
         .output()
@@ -22,7 +22,7 @@ fn has_checker(test: &str) -> bool {
 }
 
 /// `scripts/iges_check.py IGES POINTS --json`, parsed.
-fn check(iges: &Path, points: &Path) -> serde_json::Value {
+pub(super) fn check(iges: &Path, points: &Path) -> serde_json::Value {
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/iges_check.py");
     let o = Command::new("python3")
         .arg(script)
