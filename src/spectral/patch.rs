@@ -27,8 +27,8 @@ use super::cone::Cone;
 use super::fft::Fft2;
 use super::filter::{self, Filter, FilterWork};
 use super::layout::PatchSeed;
-use crate::geom::rect::min_area_rect;
 use super::sda::{self, Grid, SdaWork};
+use crate::geom::rect::min_area_rect;
 
 /// How far a patch reaches beyond its members.
 #[derive(Debug, Clone, Copy, PartialEq)]
