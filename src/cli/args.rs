@@ -149,6 +149,9 @@ pub enum ShapeChoice {
     TwoSheets,
     /// Unit sphere with a sinusoidal relief.
     Bumpy,
+    /// Gaussian bumps over [-1, 1]² (a terrain), uniform in (x, y).
+    #[value(name = "heightfield")]
+    HeightField,
 }
 
 impl From<ShapeChoice> for Shape {
@@ -158,6 +161,7 @@ impl From<ShapeChoice> for Shape {
             ShapeChoice::Torus => Shape::Torus,
             ShapeChoice::TwoSheets => Shape::TwoSheets,
             ShapeChoice::Bumpy => Shape::Bumpy,
+            ShapeChoice::HeightField => Shape::HeightField,
         }
     }
 }
@@ -598,7 +602,7 @@ mod tests {
         let m = choice_error(&["scanflow", "synth", "cube", "--points", "1", "-o", "x"]);
         assert_eq!(
             m,
-            "unknown shape \"cube\": expected one of sphere, torus, twosheets, bumpy"
+            "unknown shape \"cube\": expected one of sphere, torus, twosheets, bumpy, heightfield"
         );
         let m = choice_error(&["scanflow", "reconstruct", "a", "-o", "b", "--gpu", "yes"]);
         assert_eq!(m, "--gpu \"yes\": expected one of auto, on, off");

@@ -18,10 +18,14 @@
 //! * `bumpy`: the radial graph `s(u) = r(u) u` over unit directions `u`, with
 //!   `r(u) = R (1 + a sin(k u_x) sin(k u_y) sin(k u_z))`, R = 1, a = 0.05, k = 8. Normals are
 //!   the normalised gradient of `F(p) = |p| - r(p/|p|)`.
+//! * `heightfield`: the graph `z = h(x, y)` over the square `[-1, 1]²`, `h` a plane tilt
+//!   `0.05 x - 0.03 y` plus eight Gaussian bumps of widths 0.08 to 0.4 and heights ±0.05 to
+//!   ±0.25 (the parameters are written in the truth file). Normals are the upward graph
+//!   normals `(-h_x, -h_y, 1) / |…|`. A surface with a boundary, like a terrain tile.
 //!
 //! # Sampling
 //!
-//! Every shape is sampled exactly uniformly with respect to surface area:
+//! Every closed shape is sampled exactly uniformly with respect to surface area:
 //!
 //! * sphere: `z` uniform in [-1, 1), longitude uniform (Archimedes).
 //! * torus: longitude uniform; the minor angle `v` uniform, kept with probability
@@ -33,6 +37,12 @@
 //!   unit solid angle (`∇r` the gradient of `r` on the unit sphere) and
 //!   `B = R(1+|a|) sqrt(R²(1+|a|)² + (R a k)²)` bounds it (since `|∇g| ≤ k` for
 //!   `g = sin sin sin`). Accepted directions are therefore distributed exactly as area.
+//!
+//! The height field is not: its points are uniform in `(x, y)` (`x` and `y` uniform in
+//! `[-1, 1)`), which is how a terrain scan samples the ground (so steep flanks get fewer points
+//! per unit of area than flat ground). The truth samples of [`crate::metrics`] for it are
+//! uniform by area: a uniform `(x, y)` kept with probability `sqrt(1 + |∇h|²) / B`, where
+//! `B = sqrt(1 + S²)` and `S = |t| + Σ |a_i| / (w_i √e)` bounds the slope.
 //!
 //! Noise: each coordinate gets an independent normal deviate of standard deviation
 //! `noise × diagonal`, where `diagonal` is that of the exact surface's bounding box. Normals are
@@ -51,11 +61,13 @@
 //! * `mod.rs`: the shapes, the parameters and the driver [`synth`];
 //! * `truth.rs`: the exact surfaces ([`Truth`]), their distances and the truth file;
 //! * `bumpy.rs`: the bumpy sphere's relief, bounding box and numerical distance;
+//! * `heightfield.rs`: the height field's value, derivatives, range and numerical distance;
 //! * `sampler.rs`: sampling uniformly by area (also used by [`crate::metrics`]);
 //! * `rng.rs`, `vec.rs`: the seeded generators and small vector helpers, shared with
 //!   [`crate::metrics`].
 
 mod bumpy;
+mod heightfield;
 pub(crate) mod rng;
 pub(crate) mod sampler;
 mod truth;
@@ -73,6 +85,7 @@ use crate::io::ply_write::PointPlyWriter;
 use crate::types::{Aabb, Attributes, PointBatch};
 use sampler::{Sampler, generate_chunk};
 
+pub use heightfield::{Bump, HEIGHTFIELD_BUMPS};
 pub use truth::{Truth, TruthFile};
 
 /// Points generated per chunk; chunk `i` holds points `i × CHUNK_POINTS ..`.
@@ -89,11 +102,19 @@ pub enum Shape {
     TwoSheets,
     /// Unit sphere with a sinusoidal relief.
     Bumpy,
+    /// The graph of a sum of Gaussian bumps over `[-1, 1]²`, sampled uniformly in `(x, y)`.
+    HeightField,
 }
 
 impl Shape {
     /// Every shape, in the order of the help text.
-    pub const ALL: [Shape; 4] = [Shape::Sphere, Shape::Torus, Shape::TwoSheets, Shape::Bumpy];
+    pub const ALL: [Shape; 5] = [
+        Shape::Sphere,
+        Shape::Torus,
+        Shape::TwoSheets,
+        Shape::Bumpy,
+        Shape::HeightField,
+    ];
 
     /// The name used on the command line and in truth files.
     pub fn name(self) -> &'static str {
@@ -102,6 +123,7 @@ impl Shape {
             Shape::Torus => "torus",
             Shape::TwoSheets => "twosheets",
             Shape::Bumpy => "bumpy",
+            Shape::HeightField => "heightfield",
         }
     }
 }
@@ -469,6 +491,22 @@ mod tests {
                         let expect = scale(grad, 1.0 / norm(grad));
                         assert!(norm(sub(expect, *nrm)) < 1e-5);
                         assert!(dot(u, *nrm) > 0.0);
+                    }
+                    Shape::HeightField => {
+                        // The upward normal (-h_x, -h_y, 1) / |…| by central differences.
+                        let m = heightfield::HeightField::new(
+                            1.0,
+                            heightfield::STANDARD_TILT,
+                            heightfield::STANDARD_BUMPS,
+                        );
+                        assert!((m.value(p[0], p[1]) - p[2]).abs() < 1e-6);
+                        let e = 1e-6;
+                        let h = |x: f64, y: f64| m.value(x, y);
+                        let hx = (h(p[0] + e, p[1]) - h(p[0] - e, p[1])) / (2.0 * e);
+                        let hy = (h(p[0], p[1] + e) - h(p[0], p[1] - e)) / (2.0 * e);
+                        let l = (hx * hx + hy * hy + 1.0).sqrt();
+                        let expect = [-hx / l, -hy / l, 1.0 / l];
+                        assert!(norm(sub(expect, *nrm)) < 1e-5, "{p:?} {nrm:?}");
                     }
                 }
             }

@@ -1,11 +1,13 @@
 //! Sampling the exact surfaces uniformly by area (the constructions of the module docs of
 //! [`crate::synth`]), for the points `synth` writes and the truth samples of
-//! [`crate::metrics`].
+//! [`crate::metrics`]. The height field is the exception for `synth`'s points, which are
+//! uniform in `(x, y)` as a terrain scan is; its truth samples are uniform by area.
 
 use rand::Rng;
 use rand_distr::StandardNormal;
 
 use super::bumpy::Bumpy;
+use super::heightfield::HeightField;
 use super::rng::chunk_rng;
 use super::truth::Truth;
 use super::vec::{dot, norm, scale, sub};
@@ -13,6 +15,8 @@ use crate::types::{Aabb, PointBatch};
 
 /// A shape ready to sample.
 #[derive(Debug, Clone, Copy)]
+// The height field's bumps make it ~300 bytes: one per sampler, never in bulk.
+#[allow(clippy::large_enum_variant)]
 pub(crate) enum Sampler {
     /// A sphere of radius `radius`.
     Sphere {
@@ -40,6 +44,13 @@ pub(crate) enum Sampler {
         /// The relief.
         model: Bumpy,
         /// Bound of the area element per solid angle ([`Bumpy::area_density_bound`]).
+        bound: f64,
+    },
+    /// The height field.
+    HeightField {
+        /// The graph.
+        model: HeightField,
+        /// Bound of the area element per unit of plane area, `sqrt(1 + slope bound²)`.
         bound: f64,
     },
 }
@@ -78,10 +89,22 @@ impl Sampler {
                     bound: model.area_density_bound(),
                 }
             }
+            Truth::HeightField {
+                half_width,
+                tilt,
+                bumps,
+            } => {
+                let model = HeightField::new(half_width, tilt, bumps);
+                Sampler::HeightField {
+                    model,
+                    bound: model.slope_bound().hypot(1.0),
+                }
+            }
         }
     }
 
-    /// One point of the surface, uniform by area, and its unit normal.
+    /// One point of the surface and its unit normal: uniform by area, but for the height
+    /// field, uniform in `(x, y)` over its square (the upward normal).
     pub(crate) fn sample<R: Rng + ?Sized>(&self, rng: &mut R) -> ([f64; 3], [f64; 3]) {
         match *self {
             Sampler::Sphere { radius } => {
@@ -118,19 +141,32 @@ impl Sampler {
                 let m = sub(u, scale(grad_s, 1.0 / r));
                 (scale(u, r), scale(m, 1.0 / norm(m)))
             }
+            Sampler::HeightField { model, .. } => {
+                let (x, y) = plane_point(&model, rng);
+                ([x, y, model.value(x, y)], model.normal(x, y))
+            }
         }
     }
 
     /// One point of the surface, uniform by area, from the same random numbers as
     /// [`Sampler::sample`]. The bumpy point is placed at [`Bumpy::radius_at`], the form
     /// [`Truth::distance`] measures with (it may differ from [`Sampler::sample`]'s position
-    /// in the last bit): `scanflow check`'s figures are computed from these points.
+    /// in the last bit): `scanflow check`'s figures are computed from these points. The
+    /// height field's point is uniform by area (unlike [`Sampler::sample`]'s): a uniform
+    /// `(x, y)` kept with probability `sqrt(1 + |∇h|²) / bound`.
     pub(crate) fn sample_point<R: Rng + ?Sized>(&self, rng: &mut R) -> [f64; 3] {
         match *self {
             Sampler::Bumpy { model, bound } => {
                 let (u, _, _) = bumpy_direction(&model, bound, rng);
                 scale(u, model.radius_at(u))
             }
+            Sampler::HeightField { model, bound } => loop {
+                let (x, y) = plane_point(&model, rng);
+                let (h, g) = model.value_and_gradient(x, y);
+                if rng.random::<f64>() * bound < g[0].hypot(g[1]).hypot(1.0) {
+                    return [x, y, h];
+                }
+            },
             _ => self.sample(rng).0,
         }
     }
@@ -151,6 +187,14 @@ fn bumpy_direction<R: Rng + ?Sized>(
             return (u, r, grad_s);
         }
     }
+}
+
+/// A point uniform in the height field's square.
+fn plane_point<R: Rng + ?Sized>(model: &HeightField, rng: &mut R) -> (f64, f64) {
+    let l = model.half_width();
+    let x = l * (2.0 * rng.random::<f64>() - 1.0);
+    let y = l * (2.0 * rng.random::<f64>() - 1.0);
+    (x, y)
 }
 
 /// A uniform unit vector (Archimedes: `z` uniform, longitude uniform).
@@ -214,6 +258,80 @@ mod tests {
         let expect = 0.5 + 0.35 / std::f64::consts::PI;
         let sd = (expect * (1.0 - expect) / n as f64).sqrt();
         assert!((outer - expect).abs() < 5.0 * sd, "{outer} vs {expect}");
+    }
+
+    #[test]
+    fn heightfield_points_are_uniform_in_the_plane() {
+        let s = Sampler::new(&Truth::standard(Shape::HeightField));
+        let mut rng = chunk_rng(5, 1);
+        let n = 160_000;
+        let mut cells = [0u32; 16];
+        for _ in 0..n {
+            let (p, _) = s.sample(&mut rng);
+            assert!(
+                p[0] >= -1.0 && p[0] < 1.0 && p[1] >= -1.0 && p[1] < 1.0,
+                "{p:?}"
+            );
+            let (i, k) = (((p[0] + 1.0) * 2.0) as usize, ((p[1] + 1.0) * 2.0) as usize);
+            cells[4 * i.min(3) + k.min(3)] += 1;
+        }
+        // Equal shares of the 4 x 4 cells of the square: chi-square, 15 degrees of freedom
+        // (the 0.999 quantile is 37.7).
+        let e = n as f64 / 16.0;
+        let chi2: f64 = cells.iter().map(|&c| (c as f64 - e).powi(2) / e).sum();
+        assert!(chi2 < 37.7, "{chi2} {cells:?}");
+    }
+
+    #[test]
+    fn heightfield_truth_samples_are_uniform_by_area() {
+        let t = Truth::standard(Shape::HeightField);
+        let Truth::HeightField {
+            half_width,
+            tilt,
+            bumps,
+        } = t
+        else {
+            panic!("{t:?}")
+        };
+        let m = HeightField::new(half_width, tilt, bumps);
+        // Area-weighted mean of |∇h|² by the midpoint rule (a mean uniform in the plane is
+        // smaller: steep ground has more area per unit of plane).
+        let q = 1000;
+        let (mut num, mut den, mut plain) = (0.0, 0.0, 0.0);
+        for i in 0..q {
+            for k in 0..q {
+                let x = -1.0 + 2.0 * (i as f64 + 0.5) / q as f64;
+                let y = -1.0 + 2.0 * (k as f64 + 0.5) / q as f64;
+                let (_, g) = m.value_and_gradient(x, y);
+                let g2 = g[0] * g[0] + g[1] * g[1];
+                let w = (1.0 + g2).sqrt();
+                num += w * g2;
+                den += w;
+                plain += g2;
+            }
+        }
+        let expect = num / den;
+        let plain = plain / (q * q) as f64;
+        let s = Sampler::new(&t);
+        let mut rng = chunk_rng(13, 2);
+        let n = 200_000;
+        let (mut sum, mut sum2) = (0.0, 0.0);
+        for _ in 0..n {
+            let p = s.sample_point(&mut rng);
+            let (h, g) = m.value_and_gradient(p[0], p[1]);
+            assert_eq!(h, p[2]);
+            let g2 = g[0] * g[0] + g[1] * g[1];
+            sum += g2;
+            sum2 += g2 * g2;
+        }
+        let mean = sum / n as f64;
+        let sd = ((sum2 / n as f64 - mean * mean) / n as f64).sqrt();
+        assert!(
+            (mean - expect).abs() < 5.0 * sd,
+            "{mean} vs {expect} (sd {sd})"
+        );
+        // The test tells the two samplings apart.
+        assert!(expect - plain > 20.0 * sd, "{expect} vs {plain} (sd {sd})");
     }
 
     #[test]

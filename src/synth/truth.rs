@@ -1,6 +1,6 @@
 //! The exact surfaces (`Truth`) and the truth file `synth` writes next to its points
 //! (`TruthFile`): closed-form distances for the sphere, torus and two spheres, the bumpy
-//! sphere's numerical one.
+//! sphere's and the height field's numerical ones.
 
 use std::path::Path;
 
@@ -8,6 +8,7 @@ use serde::{Deserialize, Serialize};
 
 use super::Shape;
 use super::bumpy::Bumpy;
+use super::heightfield::{Bump, HEIGHTFIELD_BUMPS, HeightField, STANDARD_BUMPS, STANDARD_TILT};
 use super::vec::norm;
 use crate::error::{Error, IoContext, Location, Result};
 use crate::io::atomic::{self, Durability};
@@ -18,6 +19,8 @@ use crate::types::Aabb;
 /// are centred at the origin.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "shape", content = "params", rename_all = "lowercase")]
+// The height field's bumps make it ~300 bytes: a value read once per file and copied rarely.
+#[allow(clippy::large_enum_variant)]
 pub enum Truth {
     /// A sphere.
     Sphere {
@@ -47,6 +50,19 @@ pub enum Truth {
         amplitude: f64,
         /// Angular frequency k.
         frequency: f64,
+    },
+    /// The graph `z = h(x, y)` over the square `[-half_width, half_width]²`,
+    /// `h(x, y) = tilt · (x, y) + Σ height exp(-|(x, y) - centre|² / (2 width²))` over the
+    /// bumps (`{"shape":"heightfield","params":{"half_width":1.0,"tilt":[0.05,-0.03],
+    /// "bumps":[{"centre":[-0.45,-0.35],"width":0.4,"height":0.25},…]}}`).
+    #[serde(rename = "heightfield")]
+    HeightField {
+        /// Half the side of the square the graph lies over (positive).
+        half_width: f64,
+        /// Plane tilt `(t_x, t_y)`: `h` gains `t_x x + t_y y`.
+        tilt: [f64; 2],
+        /// The Gaussian bumps.
+        bumps: [Bump; HEIGHTFIELD_BUMPS],
     },
 }
 
@@ -118,6 +134,11 @@ impl Truth {
                 amplitude: 0.05,
                 frequency: 8.0,
             },
+            Shape::HeightField => Truth::HeightField {
+                half_width: 1.0,
+                tilt: STANDARD_TILT,
+                bumps: STANDARD_BUMPS,
+            },
         }
     }
 
@@ -128,6 +149,7 @@ impl Truth {
             Truth::Torus { .. } => Shape::Torus,
             Truth::TwoSheets { .. } => Shape::TwoSheets,
             Truth::Bumpy { .. } => Shape::Bumpy,
+            Truth::HeightField { .. } => Shape::HeightField,
         }
     }
 
@@ -193,12 +215,33 @@ impl Truth {
                 }
                 Ok(())
             }
+            Truth::HeightField {
+                half_width,
+                tilt,
+                bumps,
+            } => {
+                positive("half_width", half_width)?;
+                if !tilt.iter().all(|t| t.is_finite()) {
+                    return Err(format!("tilt is {tilt:?}, expected finite numbers"));
+                }
+                for (i, b) in bumps.iter().enumerate() {
+                    positive(&format!("bumps[{i}].width"), b.width)?;
+                    if !(b.height.is_finite() && b.centre.iter().all(|c| c.is_finite())) {
+                        return Err(format!(
+                            "bumps[{i}] has centre {:?} and height {}, expected finite numbers",
+                            b.centre, b.height
+                        ));
+                    }
+                }
+                Ok(())
+            }
         }
     }
 
     /// The bounding box of the surface. For `bumpy` it is computed numerically (to about
     /// 1e-12): the relief's symmetries make it the cube `[-b, b]³` with
-    /// `b = max_u r(u) u_x`.
+    /// `b = max_u r(u) u_x`. For `heightfield` it is the square times the range of `h` over
+    /// it, computed numerically (to about 1e-13).
     pub fn bounding_box(&self) -> Aabb {
         let cube = |b: f64| Aabb {
             min: [-b; 3],
@@ -222,6 +265,17 @@ impl Truth {
                 amplitude,
                 frequency,
             } => cube(Bumpy::new(radius, amplitude, frequency).max_extent()),
+            Truth::HeightField {
+                half_width,
+                tilt,
+                bumps,
+            } => {
+                let (lo, hi) = HeightField::new(half_width, tilt, bumps).height_range();
+                Aabb {
+                    min: [-half_width, -half_width, lo],
+                    max: [half_width, half_width, hi],
+                }
+            }
         }
     }
 
@@ -234,6 +288,12 @@ impl Truth {
     /// the radial direction and the best separated samples. The result is never more than the
     /// distance to any surface point tried and, for points within 0.1 of the default surface,
     /// agrees with a brute-force search to better than 1e-9 relative.
+    ///
+    /// For `heightfield`, the distance to the graph over the closed square (its sides
+    /// included): a grid search of the disc where the nearest point can lie, then projected
+    /// Newton iterations on `|p - (x, y, h(x, y))|²` from the vertical projection and the best
+    /// samples (see the height field's docs); it agrees with a brute-force search to 1e-12
+    /// relative.
     pub fn distance(&self, p: [f64; 3]) -> f64 {
         match *self {
             Truth::Sphere { radius } => (norm(p) - radius).abs(),
@@ -256,6 +316,11 @@ impl Truth {
                 amplitude,
                 frequency,
             } => Bumpy::new(radius, amplitude, frequency).distance(p),
+            Truth::HeightField {
+                half_width,
+                tilt,
+                bumps,
+            } => HeightField::new(half_width, tilt, bumps).distance(p),
         }
     }
 }
@@ -290,6 +355,31 @@ mod tests {
         let e = Truth::load(&dir.path().join("missing.json")).unwrap_err();
         assert!(matches!(e, Error::Io { .. }), "{e}");
     }
+    #[test]
+    fn heightfield_truth_round_trips_and_rejects_bad_bumps() {
+        let t = Truth::standard(Shape::HeightField);
+        let v = serde_json::to_value(t).unwrap();
+        assert_eq!(v["shape"], "heightfield");
+        assert_eq!(v["params"]["half_width"], 1.0);
+        assert_eq!(v["params"]["tilt"], serde_json::json!([0.05, -0.03]));
+        assert_eq!(v["params"]["bumps"].as_array().unwrap().len(), 8);
+        assert_eq!(
+            v["params"]["bumps"][0],
+            serde_json::json!({"centre": [-0.45, -0.35], "width": 0.4, "height": 0.25})
+        );
+        let back: Truth = serde_json::from_value(v.clone()).unwrap();
+        assert_eq!(back, t);
+        let b = t.bounding_box();
+        assert_eq!((b.min[0], b.max[1]), (-1.0, 1.0));
+        assert!(b.max[2] > 0.2 && b.min[2] < -0.15, "{b:?}");
+
+        let mut bad = v;
+        bad["params"]["bumps"][3]["width"] = serde_json::json!(0.0);
+        let bad: Truth = serde_json::from_value(bad).unwrap();
+        let msg = bad.validate().unwrap_err();
+        assert!(msg.contains("bumps[3].width"), "{msg}");
+    }
+
     #[test]
     fn closed_form_distances_match_brute_force() {
         let mut rng = Pcg64::seed_from_u64(5);
