@@ -579,6 +579,20 @@ fn choice_message(e: &clap::Error) -> Option<String> {
     }
 }
 
+impl NormalOpts {
+    /// The defaults `--normals`, `--neighbours` and the rest take, for commands (`fit
+    /// --tiles`) that ingest without normal options of their own.
+    pub fn default_for_tiles() -> NormalOpts {
+        NormalOpts {
+            normals: NormalsChoice::Auto,
+            neighbours: scanflow::normals::DEFAULT_K,
+            fixed_neighbours: false,
+            robust_normals: false,
+            viewpoint: Vec::new(),
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -644,19 +658,5 @@ mod tests {
             .unwrap_or_default();
         let cap = format!("up to {} times", scanflow::normals::MAX_K_FACTOR);
         assert!(help.contains(&cap), "{help}");
-    }
-}
-
-impl NormalOpts {
-    /// The defaults `--normals`, `--neighbours` and the rest take, for commands (`fit
-    /// --tiles`) that ingest without normal options of their own.
-    pub fn default_for_tiles() -> NormalOpts {
-        NormalOpts {
-            normals: NormalsChoice::Auto,
-            neighbours: scanflow::normals::DEFAULT_K,
-            fixed_neighbours: false,
-            robust_normals: false,
-            viewpoint: Vec::new(),
-        }
     }
 }

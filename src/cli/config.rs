@@ -18,8 +18,8 @@ use super::args::{
     CheckArgs, Cli, Cmd, Common, DemoArgs, InfoArgs, IngestArgs, NormalOpts, ReconstructArgs,
     SynthArgs,
 };
-use super::paths;
 pub use super::fit::FitConfig;
+use super::paths;
 pub use super::spectral::SpectralConfig;
 
 /// zstd levels `--zstd-level` accepts: zstd's fast levels from -7 up to its level 19 (20 and

@@ -68,13 +68,13 @@ impl FitConfig {
         }
         let tol = tolerance(&a.tolerance)?;
         if !(a.omega.is_finite() && a.omega > 0.0 && a.omega <= 1e3) {
-            bail!("--omega {}: expected a fairness weight in (0, 1000]", a.omega);
+            bail!(
+                "--omega {}: expected a fairness weight in (0, 1000]",
+                a.omega
+            );
         }
         if a.max_level > MAX_LEVEL {
-            bail!(
-                "--max-level {}: expected at most {MAX_LEVEL}",
-                a.max_level
-            );
+            bail!("--max-level {}: expected at most {MAX_LEVEL}", a.max_level);
         }
         paths::output_file_as("-o", &a.output, &["igs", "iges"], "IGES")?;
         let mut outs: Vec<(&str, &Path)> = vec![("-o", &a.output)];
@@ -89,7 +89,10 @@ impl FitConfig {
         for (i, (oa, pa)) in outs.iter().enumerate() {
             for (ob, pb) in &outs[..i] {
                 if pa == pb {
-                    bail!("{oa} {}: is also {ob}; give each output its own name", pa.display());
+                    bail!(
+                        "{oa} {}: is also {ob}; give each output its own name",
+                        pa.display()
+                    );
                 }
             }
         }
@@ -100,7 +103,10 @@ impl FitConfig {
         if !a.tiles && a.inputs.iter().any(|p| p.is_dir()) {
             bail!(
                 "{}: is a directory; a store is fitted tile by tile: add --tiles",
-                a.inputs.iter().find(|p| p.is_dir()).map_or(String::new(), |p| p.display().to_string())
+                a.inputs
+                    .iter()
+                    .find(|p| p.is_dir())
+                    .map_or(String::new(), |p| p.display().to_string())
             );
         }
         if a.tile_points < 1000 {
@@ -191,7 +197,11 @@ pub fn run(c: &FitConfig, ctx: &Ctx) -> Result<()> {
 
 fn summary(st: &FitStats, c: &FitConfig) {
     let n: usize = st.surfaces.iter().map(|s| s.points).sum();
-    let ctrl: usize = st.surfaces.iter().map(|s| s.fit.report.control_points).sum();
+    let ctrl: usize = st
+        .surfaces
+        .iter()
+        .map(|s| s.fit.report.control_points)
+        .sum();
     let tctrl: usize = st
         .surfaces
         .iter()

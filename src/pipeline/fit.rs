@@ -109,9 +109,9 @@ fn diagonal(pts: &[[f64; 3]]) -> f64 {
     (0..3).map(|x| (hi[x] - lo[x]).powi(2)).sum::<f64>().sqrt()
 }
 
-/// Reads the points of `inputs`, and the triangles when there is one PLY input that has
-/// them (faces or a range grid).
-pub fn read_points(inputs: &[PathBuf], ctx: &Ctx) -> Result<(Vec<[f64; 3]>, Vec<[u32; 3]>)> {
+/// Reads the points of `inputs` as a mesh's vertices, with the triangles when there is one
+/// PLY input that has them (faces or a range grid); none otherwise.
+pub fn read_points(inputs: &[PathBuf], ctx: &Ctx) -> Result<crate::io::mesh_read::Mesh> {
     if let [one] = inputs {
         let is_ply = std::fs::File::open(one)
             .ok()
@@ -124,7 +124,7 @@ pub fn read_points(inputs: &[PathBuf], ctx: &Ctx) -> Result<(Vec<[f64; 3]>, Vec<
         if is_ply {
             let mesh = crate::io::mesh_read::read_scan_mesh(one)?;
             if !mesh.triangles.is_empty() {
-                return Ok((mesh.vertices, mesh.triangles));
+                return Ok(mesh);
             }
         }
     }
@@ -143,7 +143,10 @@ pub fn read_points(inputs: &[PathBuf], ctx: &Ctx) -> Result<(Vec<[f64; 3]>, Vec<
             pts.extend_from_slice(&batch.pos);
         }
     }
-    Ok((pts, Vec::new()))
+    Ok(crate::io::mesh_read::Mesh {
+        vertices: pts,
+        triangles: Vec::new(),
+    })
 }
 
 /// Fits one surface to `pts` (with `tris`, their triangles, when known).
@@ -178,8 +181,8 @@ pub fn fit_one(
         tolerance,
         ..job.fit.clone()
     };
-    let fit = fit(pts, &param.uv, param.size, &params)
-        .map_err(|e| Error::input(name, e.to_string()))?;
+    let fit =
+        fit(pts, &param.uv, param.size, &params).map_err(|e| Error::input(name, e.to_string()))?;
     Ok(Surface {
         fit,
         points: pts.len(),
@@ -193,7 +196,10 @@ pub fn fit_one(
 pub fn fit_files(inputs: &[PathBuf], output: &Path, job: &FitJob, ctx: &Ctx) -> Result<FitStats> {
     let t0 = Instant::now();
     let stage = ctx.progress.stage("read", None, "points");
-    let (pts, tris) = read_points(inputs, ctx)?;
+    let crate::io::mesh_read::Mesh {
+        vertices: pts,
+        triangles: tris,
+    } = read_points(inputs, ctx)?;
     stage.finish(None);
     let secs_read = t0.elapsed().as_secs_f64();
     let name = inputs.first().map_or(output, PathBuf::as_path);
@@ -264,7 +270,10 @@ pub fn write_preview(path: &Path, surfaces: &[TensorSurface]) -> Result<()> {
             }
         }
     }
-    let size = (0..3).map(|x| hi[x] - lo[x]).fold(0.0, f64::max).max(1e-300);
+    let size = (0..3)
+        .map(|x| hi[x] - lo[x])
+        .fold(0.0, f64::max)
+        .max(1e-300);
     let mut w = MeshPlyWriter::create_format(path, VertexFormat::for_cube(lo, size, false, false))?;
     let mut base = 0u64;
     for s in surfaces {

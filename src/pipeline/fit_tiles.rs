@@ -139,7 +139,10 @@ fn bucket(store: &Store, tl: &Tiling, dir: &Path, ctx: &Ctx) -> Result<Vec<[u64;
     for t in 0..nt {
         for own in [true, false] {
             let p = tile_path(dir, t, own);
-            writers.push(BufWriter::with_capacity(buf, File::create(&p).with_path(&p)?));
+            writers.push(BufWriter::with_capacity(
+                buf,
+                File::create(&p).with_path(&p)?,
+            ));
         }
     }
     let mut counts = vec![[0u64; 2]; nt];
@@ -168,9 +171,9 @@ fn bucket(store: &Store, tl: &Tiling, dir: &Path, ctx: &Ctx) -> Result<Vec<[u64;
                     }
                     let is_own = du == 0 && dv == 0;
                     let r = tl.rect(t, tl.halo());
-                    if !is_own
-                        && !(uv[0] >= r[0][0] && uv[0] < r[1][0] && uv[1] >= r[0][1] && uv[1] < r[1][1])
-                    {
+                    let inside =
+                        uv[0] >= r[0][0] && uv[0] < r[1][0] && uv[1] >= r[0][1] && uv[1] < r[1][1];
+                    if !is_own && !inside {
                         continue;
                     }
                     let k = tl.index(t);
@@ -238,7 +241,10 @@ pub fn fit_tiles(store: &Store, work: &Path, job: &FitJob, ctx: &Ctx) -> Result<
         n += c.count;
     }
     if n < 3 {
-        return Err(Error::input(&store.dir, format!("{n} points: a surface needs at least 3")));
+        return Err(Error::input(
+            &store.dir,
+            format!("{n} points: a surface needs at least 3"),
+        ));
     }
     if !(b.max[0] > b.min[0] && b.max[1] > b.min[1]) {
         return Err(Error::input(
@@ -281,20 +287,21 @@ pub fn fit_tiles(store: &Store, work: &Path, job: &FitJob, ctx: &Ctx) -> Result<
                     (Fairness::Data, Some(r)) => Some(piece(r, &ref_coef, &tl, ti, 2)),
                     _ => None,
                 };
-                ctx.pool.install(|| {
-                    solve_block(
-                        &h,
-                        &mut coef,
-                        &own[t],
-                        &mut local,
-                        &pts,
-                        &uv,
-                        rect,
-                        omega,
-                        rpiece.as_ref(),
-                    )
-                })
-                .map_err(|e| Error::input(&store.dir, e.to_string()))?;
+                ctx.pool
+                    .install(|| {
+                        solve_block(
+                            &h,
+                            &mut coef,
+                            &own[t],
+                            &mut local,
+                            &pts,
+                            &uv,
+                            rect,
+                            omega,
+                            rpiece.as_ref(),
+                        )
+                    })
+                    .map_err(|e| Error::input(&store.dir, e.to_string()))?;
                 stage.inc(1);
             }
         }
@@ -419,10 +426,17 @@ fn piece(h: &Hierarchy, coef: &[[f64; 3]], tl: &Tiling, t: [i64; 2], grow: i64) 
 }
 
 fn note_missed(m: &mut Vec<Missed>, h: &Hierarchy, leaf: Leaf, p: [f64; 3], d: f64, tl: &Tiling) {
-    let w = [p[0] + tl.centre[0], p[1] + tl.centre[1], p[2] + tl.centre[2]];
+    let w = [
+        p[0] + tl.centre[0],
+        p[1] + tl.centre[1],
+        p[2] + tl.centre[2],
+    ];
     let s = h.spacing(leaf.level as usize);
     let lo = [leaf.cell[0] as f64 * s, leaf.cell[1] as f64 * s];
-    if let Some(e) = m.iter_mut().find(|e| e.rect[0] == lo && e.rect[1][0] - e.rect[0][0] == s) {
+    if let Some(e) = m
+        .iter_mut()
+        .find(|e| e.rect[0] == lo && e.rect[1][0] - e.rect[0][0] == s)
+    {
         e.points += 1;
         e.max_deviation = e.max_deviation.max(d);
         for x in 0..3 {
@@ -459,7 +473,10 @@ fn seam_gap(surfaces: &[Surface], tl: &Tiling) -> f64 {
                         [tu as f64 * s + along, (tv + 1) as f64 * s]
                     };
                     let (pa, pb) = (tensor::eval(a, q)[0], tensor::eval(b, q)[0]);
-                    let g = ((pa[0] - pb[0]).powi(2) + (pa[1] - pb[1]).powi(2) + (pa[2] - pb[2]).powi(2)).sqrt();
+                    let g = ((pa[0] - pb[0]).powi(2)
+                        + (pa[1] - pb[1]).powi(2)
+                        + (pa[2] - pb[2]).powi(2))
+                    .sqrt();
                     gap = gap.max(g);
                 }
             }

@@ -12,9 +12,9 @@
 //!   against.
 
 mod details;
-mod global;
 pub mod fit;
 pub mod fit_tiles;
+mod global;
 pub mod ingest;
 mod points;
 pub mod reconstruct;

@@ -45,8 +45,11 @@ pub fn solve_block(
     let mut sup: Vec<Support> = Vec::new();
     let mut lb = LocalBasis::default();
     // Points grouped by leaf cell: one dense block per leaf over its free functions.
-    let mut order: Vec<(super::hier::Leaf, u32)> =
-        uv.iter().enumerate().map(|(i, &q)| (h.leaf_of(q), i as u32)).collect();
+    let mut order: Vec<(super::hier::Leaf, u32)> = uv
+        .iter()
+        .enumerate()
+        .map(|(i, &q)| (h.leaf_of(q), i as u32))
+        .collect();
     order.sort_unstable();
     let mut start = 0;
     let mut free_sup: Vec<(usize, usize)> = Vec::new();
@@ -105,7 +108,11 @@ pub fn solve_block(
     for leaf in h.leaves() {
         let hl = h.spacing(leaf.level as usize);
         let lo = [leaf.cell[0] as f64 * hl, leaf.cell[1] as f64 * hl];
-        if lo[0] >= rect[1][0] || lo[1] >= rect[1][1] || lo[0] + hl <= rect[0][0] || lo[1] + hl <= rect[0][1] {
+        if lo[0] >= rect[1][0]
+            || lo[1] >= rect[1][1]
+            || lo[0] + hl <= rect[0][0]
+            || lo[1] + hl <= rect[0][1]
+        {
             continue;
         }
         h.supports(leaf, &mut sup);
@@ -129,7 +136,8 @@ pub fn solve_block(
                     if la == u32::MAX {
                         continue;
                     }
-                    let ma = [0, 1, 2].map(|r| m[r][0] * d2[a][0] + m[r][1] * d2[a][1] + m[r][2] * d2[a][2]);
+                    let ma = [0, 1, 2]
+                        .map(|r| m[r][0] * d2[a][0] + m[r][1] * d2[a][1] + m[r][2] * d2[a][2]);
                     for (b, sb) in sup.iter().enumerate() {
                         let v = w * (ma[0] * d2[b][0] + ma[1] * d2[b][1] + ma[2] * d2[b][2]);
                         let lbi = local[sb.index as usize];

@@ -265,6 +265,18 @@ impl Hierarchy {
         (0..4).all(|b| (0..4).all(|a| self.in_region(l, [f[0] + a, f[1] + b])))
     }
 
+    /// Whether every level-`l` cell of the support of `f` (clamped into the domain) is
+    /// refined, i.e. the support lies in `Ω_{l+1}`.
+    fn support_refined(&self, l: usize, f: [i64; 2]) -> bool {
+        l + 1 < self.levels()
+            && (0..4).all(|b| {
+                (0..4).all(|a| {
+                    let c = self.clamp_cell(l, [f[0] + a, f[1] + b]);
+                    self.refined[l].contains(&c)
+                })
+            })
+    }
+
     /// Cells of `Ω_l` inside the domain, sorted.
     fn region_cells(&self, l: usize) -> Vec<[i64; 2]> {
         if l == 0 {
@@ -310,7 +322,7 @@ impl Hierarchy {
             let act: Vec<[i64; 2]> = cand
                 .into_iter()
                 .map(|(j, i)| [i, j])
-                .filter(|&f| self.support_in(l, f) && !self.support_in(l + 1, f))
+                .filter(|&f| self.support_in(l, f) && !self.support_refined(l, f))
                 .collect();
             let map: CellMap = act
                 .iter()

@@ -114,7 +114,10 @@ fn interpolation_hits_every_point_and_bytes_do_not_depend_on_threads() {
         assert!(res <= 1e-9 * f(&r, "diagonal"), "{r}");
         bytes.push(std::fs::read(&igs).unwrap());
     }
-    assert!(bytes[0] == bytes[1], "the IGES file differs between 1 and 2 threads");
+    assert!(
+        bytes[0] == bytes[1],
+        "the IGES file differs between 1 and 2 threads"
+    );
 }
 
 #[test]
@@ -148,7 +151,10 @@ fn terrain_tiles_meet_along_their_seams() {
     }
     let c = check(&igs, &ply);
     assert_eq!(c["surfaces"].as_u64(), r["surfaces"].as_u64(), "{c}");
-    assert!(f(&c, "max") <= f(&r, "max_deviation") + 1e-6 * diag, "{c} {r}");
+    assert!(
+        f(&c, "max") <= f(&r, "max_deviation") + 1e-6 * diag,
+        "{c} {r}"
+    );
 }
 
 #[test]
@@ -181,32 +187,78 @@ fn bad_input_and_options_are_reported_before_or_without_a_hang() {
     let d = tempfile::tempdir().unwrap();
     // A closed sphere is not a disc.
     let sphere = d.path().join("sphere.ply");
-    ok(&["synth", "sphere", "--points", "3000", "-o", s(&sphere), "--progress", "none"]);
-    let e = fails(&["fit", s(&sphere), "-o", s(&d.path().join("x.igs")), "--tolerance", "0.1%", "--progress", "none"]);
+    ok(&[
+        "synth",
+        "sphere",
+        "--points",
+        "3000",
+        "-o",
+        s(&sphere),
+        "--progress",
+        "none",
+    ]);
+    let e = fails(&[
+        "fit",
+        s(&sphere),
+        "-o",
+        s(&d.path().join("x.igs")),
+        "--tolerance",
+        "0.1%",
+        "--progress",
+        "none",
+    ]);
     assert!(e.contains("sphere.ply") && e.contains("--patches"), "{e}");
     let hf = heightfield(d.path(), 2000, 0.0);
     for (args, want) in [
         (vec!["--tolerance", "abc"], "--tolerance abc"),
         (vec!["--tolerance", "-1"], "positive"),
         (vec!["--tolerance", "0.1%", "--omega", "0"], "--omega"),
-        (vec!["--tolerance", "0.1%", "--max-level", "99"], "--max-level"),
+        (
+            vec!["--tolerance", "0.1%", "--max-level", "99"],
+            "--max-level",
+        ),
     ] {
         let mut a = vec!["fit", s(&hf), "-o", "x.igs"];
         a.extend(args);
         let e = usage(&a);
         assert!(e.contains(want), "{e}");
     }
-    let e = usage(&["fit", s(&hf), "-o", s(&d.path().join("x.ply")), "--tolerance", "1"]);
+    let e = usage(&[
+        "fit",
+        s(&hf),
+        "-o",
+        s(&d.path().join("x.ply")),
+        "--tolerance",
+        "1",
+    ]);
     assert!(e.contains("IGES"), "{e}");
     // A tolerance that cannot be met within --max-level: the regions are named, exit 1.
     let igs = d.path().join("unmet.igs");
     let e = fails(&[
-        "fit", s(&hf), "-o", s(&igs), "--tolerance", "1e-9", "--max-level", "1", "--progress", "none",
+        "fit",
+        s(&hf),
+        "-o",
+        s(&igs),
+        "--tolerance",
+        "1e-9",
+        "--max-level",
+        "1",
+        "--progress",
+        "none",
     ]);
     assert!(e.contains("not met") && e.contains("points in"), "{e}");
     // Too few points.
     let tiny = d.path().join("tiny.xyz");
     std::fs::write(&tiny, "0 0 0\n1 0 0\n").unwrap();
-    let e = fails(&["fit", s(&tiny), "-o", s(&d.path().join("t.igs")), "--tolerance", "1", "--progress", "none"]);
+    let e = fails(&[
+        "fit",
+        s(&tiny),
+        "-o",
+        s(&d.path().join("t.igs")),
+        "--tolerance",
+        "1",
+        "--progress",
+        "none",
+    ]);
     assert!(e.contains("tiny.xyz") && e.contains("at least 3"), "{e}");
 }

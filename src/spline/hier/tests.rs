@@ -171,11 +171,77 @@ fn prolongation_keeps_the_surface_exactly() {
     fine.refine(&leaves, 6);
     let c2 = coarse.prolong(&coef, &fine);
     for k in 0..300 {
-        let uv = [2.0 * (k as f64 * 0.618_034).fract(), 1.5 * (k as f64 * 0.414_214).fract()];
+        let uv = [
+            2.0 * (k as f64 * 0.618_034).fract(),
+            1.5 * (k as f64 * 0.414_214).fract(),
+        ];
         let a = coarse.eval(&coef, uv)[0];
         let b = fine.eval(&c2, uv)[0];
         for x in 0..3 {
             assert!((a[x] - b[x]).abs() < 1e-12, "{uv:?}");
         }
     }
+}
+
+/// Smallest eigenvalue of the Gram matrix (scaled to a unit diagonal) of the basis over a
+/// dense sample of the domain, relative to the largest.
+fn gram_condition(h: &Hierarchy) -> f64 {
+    let n = h.len();
+    let mut g = nalgebra::DMatrix::<f64>::zeros(n, n);
+    let size = h.size();
+    let m = 120;
+    let mut sup = Vec::new();
+    let mut lb = LocalBasis::default();
+    for b in 0..m {
+        for a in 0..m {
+            let uv = [
+                size[0] * (a as f64 + 0.5) / m as f64,
+                size[1] * (b as f64 + 0.5) / m as f64,
+            ];
+            let leaf = h.leaf_of(uv);
+            h.supports(leaf, &mut sup);
+            h.local_basis(leaf, uv, &mut lb);
+            for x in &sup {
+                for y in &sup {
+                    g[(x.index as usize, y.index as usize)] += lb.value(x) * lb.value(y);
+                }
+            }
+        }
+    }
+    let d: Vec<f64> = (0..n).map(|i| g[(i, i)].sqrt()).collect();
+    for i in 0..n {
+        for j in 0..n {
+            g[(i, j)] /= d[i] * d[j];
+        }
+    }
+    let e = nalgebra::SymmetricEigen::new(g).eigenvalues;
+    let (lo, hi) = e
+        .iter()
+        .fold((f64::MAX, 0.0f64), |a, &x| (a.0.min(x), a.1.max(x)));
+    lo / hi
+}
+
+#[test]
+fn the_basis_stays_independent_when_refinement_touches_the_edge() {
+    let mut h = Hierarchy::new(0.5, [4, 4]);
+    let all = h.leaves();
+    h.refine(&all, 5);
+    assert!(gram_condition(&h) > 1e-6, "{}", gram_condition(&h));
+    // A rectangle against the right edge, then one against a corner, a level deeper.
+    let edge: Vec<Leaf> = h
+        .leaves()
+        .into_iter()
+        .filter(|l| l.cell[0] == 7 && l.cell[1] >= 3 && l.cell[1] <= 4)
+        .collect();
+    h.refine(&edge, 5);
+    let c1 = gram_condition(&h);
+    let corner: Vec<Leaf> = h
+        .leaves()
+        .into_iter()
+        .filter(|l| l.level == 2 && l.cell[0] >= 14 && l.cell[1] >= 8)
+        .take(2)
+        .collect();
+    h.refine(&corner, 5);
+    let c2 = gram_condition(&h);
+    assert!(c1 > 1e-8 && c2 > 1e-8, "{c1} {c2} {:?}", h.per_level());
 }
