@@ -18,6 +18,7 @@
 //! Memory: the coefficient vector and the hierarchy (tens of bytes per control point), plus
 //! one tile's points and block system at a time, admitted by the budget.
 
+use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::{BufReader, BufWriter, Read, Write};
 use std::path::{Path, PathBuf};
@@ -260,7 +261,20 @@ pub fn fit_tiles(store: &Store, work: &Path, job: &FitJob, ctx: &Ctx) -> Result<
     let secs_read = t0.elapsed().as_secs_f64();
     let cells0 = [tl.tiles[0] * TILE_CELLS, tl.tiles[1] * TILE_CELLS];
     let mut h = Hierarchy::new(tl.h0, cells0);
-    let mut coef = vec![[0.0f64; 3]; h.len()];
+    // Start from the plane z = 0 (in coordinates about the centre): x and y are linear in the
+    // parameters, reproduced exactly by coefficients at the functions' Greville points.
+    let shift = [tl.centre[0] - tl.origin[0], tl.centre[1] - tl.origin[1]];
+    let mut coef: Vec<[f64; 3]> = h
+        .functions()
+        .map(|(_, l, f)| {
+            let hl = h.spacing(l);
+            [
+                (f[0] as f64 + 2.0) * hl - shift[0],
+                (f[1] as f64 + 2.0) * hl - shift[1],
+                0.0,
+            ]
+        })
+        .collect();
     let mut omega = job.fit.omega;
     let max_iter = 3 * (job.fit.max_level + 1) + 6;
     let mut iterations = 0;
@@ -318,7 +332,7 @@ pub fn fit_tiles(store: &Store, work: &Path, job: &FitJob, ctx: &Ctx) -> Result<
                     .map(|&p| tensor::project(&s, p, tl.uv(p)))
                     .collect()
             });
-            let mut m = Vec::new();
+            let mut m = BTreeMap::new();
             let (mut max, mut sq) = (0.0f64, 0.0f64);
             for ((q, dd), p) in d.iter().zip(&pts) {
                 max = max.max(*dd);
@@ -330,7 +344,7 @@ pub fn fit_tiles(store: &Store, work: &Path, job: &FitJob, ctx: &Ctx) -> Result<
                 }
             }
             dist.push((max, sq, pts.len() as u64));
-            missed.push(m);
+            missed.push(m.into_values().collect());
         }
         bad.sort_unstable();
         bad.dedup();
@@ -425,31 +439,34 @@ fn piece(h: &Hierarchy, coef: &[[f64; 3]], tl: &Tiling, t: [i64; 2], grow: i64) 
     h.to_tensor_rect(coef, [0.0; 3], lo, hi)
 }
 
-fn note_missed(m: &mut Vec<Missed>, h: &Hierarchy, leaf: Leaf, p: [f64; 3], d: f64, tl: &Tiling) {
+fn note_missed(
+    m: &mut BTreeMap<Leaf, Missed>,
+    h: &Hierarchy,
+    leaf: Leaf,
+    p: [f64; 3],
+    d: f64,
+    tl: &Tiling,
+) {
     let w = [
         p[0] + tl.centre[0],
         p[1] + tl.centre[1],
         p[2] + tl.centre[2],
     ];
-    let s = h.spacing(leaf.level as usize);
-    let lo = [leaf.cell[0] as f64 * s, leaf.cell[1] as f64 * s];
-    if let Some(e) = m
-        .iter_mut()
-        .find(|e| e.rect[0] == lo && e.rect[1][0] - e.rect[0][0] == s)
-    {
-        e.points += 1;
-        e.max_deviation = e.max_deviation.max(d);
-        for x in 0..3 {
-            e.bounds[0][x] = e.bounds[0][x].min(w[x]);
-            e.bounds[1][x] = e.bounds[1][x].max(w[x]);
-        }
-    } else {
-        m.push(Missed {
+    let e = m.entry(leaf).or_insert_with(|| {
+        let s = h.spacing(leaf.level as usize);
+        let lo = [leaf.cell[0] as f64 * s, leaf.cell[1] as f64 * s];
+        Missed {
             rect: [lo, [lo[0] + s, lo[1] + s]],
             bounds: [w, w],
-            points: 1,
-            max_deviation: d,
-        });
+            points: 0,
+            max_deviation: 0.0,
+        }
+    });
+    e.points += 1;
+    e.max_deviation = e.max_deviation.max(d);
+    for x in 0..3 {
+        e.bounds[0][x] = e.bounds[0][x].min(w[x]);
+        e.bounds[1][x] = e.bounds[1][x].max(w[x]);
     }
 }
 
