@@ -237,7 +237,7 @@ pub struct FitArgs {
     pub output: PathBuf,
     /// Largest deviation of a point from its surface: in input units, or a percentage of the
     /// bounding-box diagonal (`0.1%`).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub tolerance: String,
     /// Interpolate every point (Lagrange multipliers) instead of approximating.
     #[arg(long)]

@@ -3,7 +3,7 @@
 //! **Frame.** The base plane's normal `n` is the axis of the patch's normal cone (the
 //! smallest cap holding its normals, [`cone`](super::cone)); its origin is the centroid of the
 //! patch's points. The members' projections `(u, v)` get their smallest enclosing rectangle
-//! ([`rect`](super::rect)), whose sides become the `u` and `v` axes, so that the parameter box
+//! ([`rect`](crate::geom::rect)), whose sides become the `u` and `v` axes, so that the parameter box
 //! wastes as little of the grid as possible. Every point is `origin + u·U + v·V + h·N`.
 //!
 //! **Overlap.** The parameter box is the members' rectangle grown by [`Overlap::fraction`]

@@ -7,7 +7,8 @@
 //!    approximation by the penalty method `(BᵀB + ω s A₀) c = BᵀP` ([`super::solve`]), where
 //!    `s = tr(BᵀB) / tr(A₀)` makes `ω` dimensionless (the same `ω` weighs fairness alike at
 //!    every level and scale); `ω` starts at `--omega` (0.1) and is multiplied by 0.1 each
-//!    iteration, down to `1e-7`. Interpolation solves the Lagrange system instead, once the
+//!    iteration, down to [`OMEGA_FLOOR`] (a floor, so that a region with few points keeps
+//!    a smooth surface instead of folding between them). Interpolation solves the Lagrange system instead, once the
 //!    space holds at most one point per leaf cell.
 //! 2. **Fairness** `A₀` (§6) is the thin-plate energy `∫ |S_uu|² + 2|S_uv|² + |S_vv|²` over
 //!    the domain (*simple*), or its data-dependent form `∫ tr(G⁻¹ H G⁻¹ H) √det G`, where `H`
@@ -79,7 +80,7 @@ impl Default for FitParams {
 }
 
 /// Smallest ω the schedule reaches.
-pub const OMEGA_FLOOR: f64 = 1e-7;
+pub const OMEGA_FLOOR: f64 = 1e-4;
 
 /// A leaf cell where the tolerance could not be met within `max_level`.
 #[derive(Clone, Debug, PartialEq)]
@@ -160,10 +161,10 @@ pub enum FitError {
 }
 
 /// The points' parameters in the hierarchy's domain: the domain is the parameter rectangle
-/// grown by 2% of its longer side on each side (so foot points stay inside) and rounded up to
+/// grown by 0.5% of its longer side on each side (so foot points stay inside) and rounded up to
 /// whole level-0 cells, centred on it.
 fn domain(size: [f64; 2], base: usize) -> (f64, [i64; 2], [f64; 2]) {
-    let margin = 0.02 * size[0].max(size[1]);
+    let margin = 0.005 * size[0].max(size[1]);
     let grown = [size[0] + 2.0 * margin, size[1] + 2.0 * margin];
     let h0 = grown[0].max(grown[1]) / base as f64;
     let cells = grown.map(|g| ((g / h0) - 1e-9).ceil().max(1.0) as i64);

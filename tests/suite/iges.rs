@@ -234,7 +234,11 @@ fn unit_flag_decides_opencascade_scaling_and_millimetres_scale_nothing() {
         write_iges(&iges, std::slice::from_ref(&s), &meta).unwrap();
         let r = check(&iges, &pts);
         if unit == IgesUnit::Millimetre {
-            assert_eq!(r["boundary_nearest"], 1, "{r}");
+            // The point beyond the edge is caught by the clamped Newton search or the boundary
+            // sample; the tree projection alone reports a farther local minimum.
+            let caught =
+                r["boundary_nearest"].as_u64().unwrap() + r["local_nearer"].as_u64().unwrap();
+            assert!(caught >= 1, "{r}");
             let max = r["max"].as_f64().unwrap();
             assert!((max - 0.5).abs() < 1e-6, "beyond the edge: {max}");
         }
