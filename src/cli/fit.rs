@@ -196,43 +196,29 @@ pub fn run(c: &FitConfig, ctx: &Ctx) -> Result<()> {
 }
 
 fn summary(st: &FitStats, c: &FitConfig) {
-    let n: usize = st.surfaces.iter().map(|s| s.points).sum();
-    let ctrl: usize = st
-        .surfaces
-        .iter()
-        .map(|s| s.fit.report.control_points)
-        .sum();
-    let tctrl: usize = st
-        .surfaces
-        .iter()
-        .map(|s| s.fit.report.tensor_control_points)
-        .sum();
-    let max = st
-        .surfaces
-        .iter()
-        .map(|s| s.fit.report.max_deviation)
-        .fold(0.0, f64::max);
-    let sq: f64 = st
-        .surfaces
-        .iter()
-        .map(|s| s.fit.report.rms_deviation.powi(2) * s.points as f64)
-        .sum();
+    let t = st.totals();
     outln!(
-        "fitted {n} points with {} surface(s) into {} in {:.2} s ({:.0} points/s); peak memory {}",
+        "fitted {} points with {} surface(s) into {} in {:.2} s ({:.0} points/s); peak memory {}",
+        t.points,
         st.surfaces.len(),
         c.output.display(),
         st.secs,
-        n as f64 / st.secs.max(1e-9),
+        t.points as f64 / st.secs.max(1e-9),
         human_bytes(peak_rss_bytes())
     );
     outln!(
-        "control points: {ctrl} hierarchical, {tctrl} in the exported tensor-product surface(s)"
+        "control points: {} hierarchical, {} in the exported tensor-product surface(s)",
+        t.control_points,
+        t.tensor_control_points
     );
     outln!(
         "deviation: max {:.4e}, RMS {:.4e} (tolerance {:.4e}; diagonal {:.4e})",
-        max,
-        (sq / n.max(1) as f64).sqrt(),
+        t.max_deviation,
+        t.rms_deviation,
         st.tolerance,
         st.diagonal
     );
+    if let Some(g) = st.seam_gap {
+        outln!("largest gap between neighbouring tiles along their seams: {g:.3e}");
+    }
 }

@@ -303,20 +303,46 @@ pub fn write_preview(path: &Path, surfaces: &[TensorSurface]) -> Result<()> {
     Ok(())
 }
 
+/// A run's figures summed over its surfaces.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Totals {
+    /// Points.
+    pub points: usize,
+    /// Control points of the hierarchies.
+    pub control_points: usize,
+    /// Control points of the exported surfaces.
+    pub tensor_control_points: usize,
+    /// Largest deviation.
+    pub max_deviation: f64,
+    /// Root mean square deviation over every point.
+    pub rms_deviation: f64,
+}
+
+impl FitStats {
+    /// The figures summed over the surfaces.
+    pub fn totals(&self) -> Totals {
+        let s = &self.surfaces;
+        let points: usize = s.iter().map(|s| s.points).sum();
+        let sq: f64 = s
+            .iter()
+            .map(|s| s.fit.report.rms_deviation.powi(2) * s.points as f64)
+            .sum();
+        Totals {
+            points,
+            control_points: s.iter().map(|s| s.fit.report.control_points).sum(),
+            tensor_control_points: s.iter().map(|s| s.fit.report.tensor_control_points).sum(),
+            max_deviation: s
+                .iter()
+                .map(|s| s.fit.report.max_deviation)
+                .fold(0.0, f64::max),
+            rms_deviation: (sq / points.max(1) as f64).sqrt(),
+        }
+    }
+}
+
 /// The JSON report of a run (the fields `scanflow fit --report` documents).
 pub fn report_json(st: &FitStats, job: &FitJob) -> serde_json::Value {
-    let n: usize = st.surfaces.iter().map(|s| s.points).sum();
-    let sum = |f: &dyn Fn(&Surface) -> usize| st.surfaces.iter().map(f).sum::<usize>();
-    let max_dev = st
-        .surfaces
-        .iter()
-        .map(|s| s.fit.report.max_deviation)
-        .fold(0.0, f64::max);
-    let sq: f64 = st
-        .surfaces
-        .iter()
-        .map(|s| s.fit.report.rms_deviation.powi(2) * s.points as f64)
-        .sum();
+    let t = st.totals();
     let levels = st.surfaces.iter().fold(Vec::<usize>::new(), |mut acc, s| {
         for (l, c) in s.fit.report.per_level.iter().enumerate() {
             if acc.len() <= l {
@@ -354,12 +380,12 @@ pub fn report_json(st: &FitStats, job: &FitJob) -> serde_json::Value {
         })
         .collect();
     serde_json::json!({
-        "points": n,
+        "points": t.points,
         "surfaces": st.surfaces.len(),
-        "control_points": sum(&|s| s.fit.report.control_points),
-        "tensor_control_points": sum(&|s| s.fit.report.tensor_control_points),
-        "max_deviation": max_dev,
-        "rms_deviation": (sq / n.max(1) as f64).sqrt(),
+        "control_points": t.control_points,
+        "tensor_control_points": t.tensor_control_points,
+        "max_deviation": t.max_deviation,
+        "rms_deviation": t.rms_deviation,
         "diagonal": st.diagonal,
         "tolerance": st.tolerance,
         "met": st.surfaces.iter().all(|s| s.fit.report.met),
