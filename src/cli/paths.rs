@@ -26,7 +26,7 @@ pub fn output_file_as(opt: &str, path: &Path, exts: &[&str], format: &str) -> Re
     let got = path.extension().and_then(|e| e.to_str()).unwrap_or("");
     if !exts.iter().any(|e| got.eq_ignore_ascii_case(e)) {
         bail!(
-            "{opt} {shown}: scanflow writes {format} here; name it *.{} (other formats are not written)",
+            "{opt} {shown}: scanflow writes {format} here; name the output *.{} (other formats are not written)",
             exts.join(" or *.")
         );
     }
