@@ -264,18 +264,33 @@ pub struct FitArgs {
     /// Points a tile aims at (--tiles): the tile grid follows the point count, never --mem.
     #[arg(long, default_value_t = scanflow::pipeline::fit_tiles::TILE_POINTS)]
     pub tile_points: u64,
+    /// Closed objects: one surface per patch of the spectral patch layout (each patch a
+    /// height field over its normals' mean direction), with the gap between neighbouring
+    /// patches' surfaces reported.
+    #[arg(long, conflicts_with = "tiles")]
+    pub patches: bool,
+    /// Most points in a patch (--patches), before its overlap with its neighbours.
+    #[arg(long, default_value_t = scanflow::pipeline::fit_patches::PATCH_POINTS)]
+    pub patch_points: usize,
+    /// Full aperture of a patch's normal cone, degrees (--patches): larger gives fewer,
+    /// steeper patches.
+    #[arg(long, default_value_t = scanflow::pipeline::fit_patches::PATCH_ANGLE)]
+    pub patch_angle: f64,
     /// Write a tessellated preview mesh (binary PLY).
     #[arg(long)]
     pub preview: Option<PathBuf>,
     /// Write the report (JSON).
     #[arg(long)]
     pub report: Option<PathBuf>,
-    /// Work directory for the ingested store (--tiles; default: OUTPUT.work).
+    /// Work directory for the ingested store (--tiles, --patches; default: OUTPUT.work).
     #[arg(long)]
     pub work_dir: Option<PathBuf>,
     /// Keep the work directory after success.
     #[arg(long)]
     pub keep_work: bool,
+    /// Normal options (--patches: the layout groups points by their normals).
+    #[command(flatten)]
+    pub normal: NormalOpts,
     /// Threads, memory, progress.
     #[command(flatten)]
     pub common: Common,
@@ -576,20 +591,6 @@ fn choice_message(e: &clap::Error) -> Option<String> {
             "--progress \"{value}\": expected auto, bars, json or none"
         )),
         _ => None,
-    }
-}
-
-impl NormalOpts {
-    /// The defaults `--normals`, `--neighbours` and the rest take, for commands (`fit
-    /// --tiles`) that ingest without normal options of their own.
-    pub fn default_for_tiles() -> NormalOpts {
-        NormalOpts {
-            normals: NormalsChoice::Auto,
-            neighbours: scanflow::normals::DEFAULT_K,
-            fixed_neighbours: false,
-            robust_normals: false,
-            viewpoint: Vec::new(),
-        }
     }
 }
 

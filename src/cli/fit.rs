@@ -6,11 +6,12 @@ use anyhow::{Result, bail};
 
 use scanflow::exec::{Ctx, human_bytes, peak_rss_bytes};
 use scanflow::pipeline::fit::{FitJob, FitStats, Tolerance, fit_files, write_report};
+use scanflow::pipeline::fit_patches::{MIN_PATCH_POINTS, PatchShape};
 use scanflow::spline::fit::{Fairness, FitParams, Refine};
 use scanflow::spline::param::Method;
 
 use super::args::{FairnessChoice, FitArgs, ParamChoice, RefineChoice};
-use super::config::{RunConfig, work_dir};
+use super::config::{Points, RunConfig, work_dir};
 use super::paths;
 
 /// Finest level `--max-level` allows (knot spacing 2⁻²⁰ of the coarsest).
@@ -28,6 +29,11 @@ pub struct FitConfig {
     pub job: FitJob,
     /// `--tiles`.
     pub tiles: bool,
+    /// `--patches`: the patches' size and flatness.
+    pub patches: Option<PatchShape>,
+    /// What `--tiles` and `--patches` read: a store, or point files ingested with these
+    /// normal options.
+    pub points: Points,
     /// The work directory (`--tiles`).
     pub work_dir: PathBuf,
     /// `--keep-work`.
@@ -100,9 +106,9 @@ impl FitConfig {
         for (_, p) in &outs {
             paths::not_an_input(p, &given)?;
         }
-        if !a.tiles && a.inputs.iter().any(|p| p.is_dir()) {
+        if !a.tiles && !a.patches && a.inputs.iter().any(|p| p.is_dir()) {
             bail!(
-                "{}: is a directory; a store is fitted tile by tile: add --tiles",
+                "{}: is a directory; a store is fitted tile by tile (--tiles) or patch by patch (--patches)",
                 a.inputs
                     .iter()
                     .find(|p| p.is_dir())
@@ -112,6 +118,19 @@ impl FitConfig {
         if a.tile_points < 1000 {
             bail!("--tile-points {}: expected at least 1000", a.tile_points);
         }
+        if a.patch_points < MIN_PATCH_POINTS {
+            bail!(
+                "--patch-points {}: expected at least {MIN_PATCH_POINTS}",
+                a.patch_points
+            );
+        }
+        if !(a.patch_angle > 0.0 && a.patch_angle < 180.0) {
+            bail!(
+                "--patch-angle {}: expected a full cone aperture in degrees, in (0, 180)",
+                a.patch_angle
+            );
+        }
+        let points = Points::new(a.inputs.clone(), None, &a.normal)?;
         let work_dir = work_dir(a.work_dir, &a.output)?;
         let method = match a.param {
             ParamChoice::Project => Method::Project,
@@ -146,6 +165,11 @@ impl FitConfig {
                 tile_points: a.tile_points,
             },
             tiles: a.tiles,
+            patches: a.patches.then_some(PatchShape {
+                points: a.patch_points,
+                angle: a.patch_angle,
+            }),
+            points,
             work_dir,
             keep_work: a.keep_work,
         })
@@ -154,7 +178,7 @@ impl FitConfig {
 
 /// Run the fit and print its summary. A tolerance missed is reported and exits non-zero.
 pub fn run(c: &FitConfig, ctx: &Ctx) -> Result<()> {
-    let st = if c.tiles {
+    let st = if c.tiles || c.patches.is_some() {
         super::fit_tiles::run(c, ctx)?
     } else {
         fit_files(&c.inputs, &c.output, &c.job, ctx)?
@@ -199,11 +223,11 @@ fn summary(st: &FitStats, c: &FitConfig) {
     let t = st.totals();
     outln!(
         "fitted {} points with {} surface(s) into {} in {:.2} s ({:.0} points/s); peak memory {}",
-        t.points,
+        st.input_points,
         st.surfaces.len(),
         c.output.display(),
         st.secs,
-        t.points as f64 / st.secs.max(1e-9),
+        st.input_points as f64 / st.secs.max(1e-9),
         human_bytes(peak_rss_bytes())
     );
     outln!(
@@ -218,7 +242,14 @@ fn summary(st: &FitStats, c: &FitConfig) {
         st.tolerance,
         st.diagonal
     );
-    if let Some(g) = st.seam_gap {
-        outln!("largest gap between neighbouring tiles along their seams: {g:.3e}");
+    match st.seam_gap {
+        Some(g) if c.tiles => {
+            outln!("largest gap between neighbouring tiles along their seams: {g:.3e}")
+        }
+        Some(g) => outln!(
+            "largest gap between neighbouring patches' surfaces along their shared boundaries: {g:.3e} ({} pairs of neighbours)",
+            st.gaps.len()
+        ),
+        None => {}
     }
 }

@@ -17,7 +17,7 @@ use crate::io::iges::{IgesMeta, write_iges};
 use crate::io::mesh_write::{MeshPlyWriter, VertexFormat};
 use crate::spline::fit::{Fit, FitParams, fit};
 use crate::spline::graph::Graph;
-use crate::spline::param::{Method, Param, parameterise};
+use crate::spline::param::{Method, Param, parameterise_facing};
 use crate::spline::tensor;
 use crate::types::TensorSurface;
 
@@ -85,6 +85,8 @@ pub struct Surface {
 pub struct FitStats {
     /// The surfaces.
     pub surfaces: Vec<Surface>,
+    /// Points read (a surface's count includes the overlap it shares with its neighbours).
+    pub input_points: usize,
     /// Diagonal of the points' bounding box.
     pub diagonal: f64,
     /// The tolerance in input units.
@@ -93,8 +95,13 @@ pub struct FitStats {
     pub secs_read: f64,
     /// Seconds in all.
     pub secs: f64,
-    /// Largest gap between neighbouring surfaces along their shared edges (tiles).
+    /// Largest gap between neighbouring surfaces along their shared edges (tiles, patches).
     pub seam_gap: Option<f64>,
+    /// The gaps between neighbouring patches (`--patches`).
+    pub gaps: Vec<super::fit_patches::PatchGap>,
+    /// Largest and RMS deviation over the points read, each to the nearest surface fitted to
+    /// it, where surfaces share points (`--patches`); else the surfaces' own figures count.
+    pub point_deviation: Option<[f64; 2]>,
 }
 
 fn diagonal(pts: &[[f64; 3]]) -> f64 {
@@ -149,10 +156,12 @@ pub fn read_points(inputs: &[PathBuf], ctx: &Ctx) -> Result<crate::io::mesh_read
     })
 }
 
-/// Fits one surface to `pts` (with `tris`, their triangles, when known).
+/// Fits one surface to `pts` (with `tris`, their triangles, when known), parameterised over
+/// the plane normal to `facing` when given (else their best-fit plane).
 pub fn fit_one(
     pts: &[[f64; 3]],
     tris: &[[u32; 3]],
+    facing: Option<[f64; 3]>,
     job: &FitJob,
     tolerance: f64,
     name: &Path,
@@ -172,10 +181,11 @@ pub fn fit_one(
     } else {
         Graph::from_triangles(name, pts.len(), tris)?
     };
-    let param: Param = parameterise(pts, &graph, job.method).map_err(|e| match e {
-        Error::Usage(m) | Error::Internal(m) => Error::input(name, m),
-        e => e,
-    })?;
+    let param: Param =
+        parameterise_facing(pts, &graph, job.method, facing).map_err(|e| match e {
+            Error::Usage(m) | Error::Internal(m) => Error::input(name, m),
+            e => e,
+        })?;
     let t1 = Instant::now();
     let params = FitParams {
         tolerance,
@@ -214,17 +224,20 @@ pub fn fit_files(inputs: &[PathBuf], output: &Path, job: &FitJob, ctx: &Ctx) -> 
     let stage = ctx.progress.stage("fit", None, "surfaces");
     let surface = ctx
         .pool
-        .install(|| fit_one(&pts, &tris, job, tolerance, name))?;
+        .install(|| fit_one(&pts, &tris, None, job, tolerance, name))?;
     stage.finish(None);
     let surfaces = vec![surface];
     write_outputs(output, job, &surfaces, input_stamp(inputs))?;
     Ok(FitStats {
         surfaces,
+        input_points: pts.len(),
         diagonal: diag,
         tolerance,
         secs_read,
         secs: t0.elapsed().as_secs_f64(),
         seam_gap: None,
+        gaps: Vec::new(),
+        point_deviation: None,
     })
 }
 
@@ -306,15 +319,15 @@ pub fn write_preview(path: &Path, surfaces: &[TensorSurface]) -> Result<()> {
 /// A run's figures summed over its surfaces.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Totals {
-    /// Points.
+    /// Points the surfaces were fitted to (overlaps counted in each).
     pub points: usize,
     /// Control points of the hierarchies.
     pub control_points: usize,
     /// Control points of the exported surfaces.
     pub tensor_control_points: usize,
-    /// Largest deviation.
+    /// Largest deviation of a point read ([`FitStats::point_deviation`]).
     pub max_deviation: f64,
-    /// Root mean square deviation over every point.
+    /// Root mean square deviation over the points read.
     pub rms_deviation: f64,
 }
 
@@ -331,11 +344,17 @@ impl FitStats {
             points,
             control_points: s.iter().map(|s| s.fit.report.control_points).sum(),
             tensor_control_points: s.iter().map(|s| s.fit.report.tensor_control_points).sum(),
-            max_deviation: s
-                .iter()
-                .map(|s| s.fit.report.max_deviation)
-                .fold(0.0, f64::max),
-            rms_deviation: (sq / points.max(1) as f64).sqrt(),
+            max_deviation: self.point_deviation.map_or_else(
+                || {
+                    s.iter()
+                        .map(|s| s.fit.report.max_deviation)
+                        .fold(0.0, f64::max)
+                },
+                |d| d[0],
+            ),
+            rms_deviation: self
+                .point_deviation
+                .map_or_else(|| (sq / points.max(1) as f64).sqrt(), |d| d[1]),
         }
     }
 }
@@ -394,7 +413,11 @@ pub fn report_json(st: &FitStats, job: &FitJob) -> serde_json::Value {
         "fairness_energy": st.surfaces.iter().map(|s| s.fit.report.fairness_energy).sum::<f64>(),
         "iterations": st.surfaces.iter().map(|s| s.fit.report.iterations).max().unwrap_or(0),
         "interpolate": job.fit.interpolate,
+        "input_points": st.input_points,
         "seam_max_gap": st.seam_gap,
+        "patch_gaps": st.gaps.iter().map(|g| serde_json::json!({
+            "patches": g.patches, "points": g.points,
+            "max_gap": g.max_gap, "rms_gap": g.rms_gap})).collect::<Vec<_>>(),
         "seconds": st.secs,
         "seconds_read": st.secs_read,
         "surfaces_detail": detail,

@@ -412,11 +412,14 @@ pub fn fit_tiles(store: &Store, work: &Path, job: &FitJob, ctx: &Ctx) -> Result<
     let seam = seam_gap(&surfaces, &tl);
     Ok(FitStats {
         surfaces,
+        input_points: n as usize,
         diagonal: diag,
         tolerance,
         secs_read,
         secs: t0.elapsed().as_secs_f64(),
         seam_gap: Some(seam),
+        gaps: Vec::new(),
+        point_deviation: None,
     })
 }
 

@@ -13,6 +13,7 @@
 
 mod details;
 pub mod fit;
+pub mod fit_patches;
 pub mod fit_tiles;
 mod global;
 pub mod ingest;

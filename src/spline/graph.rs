@@ -217,6 +217,25 @@ impl Graph {
     }
 }
 
+/// The `k` nearest other points of every point (exact, ties by the smaller index), as one
+/// array of `points.len() × k` indices; fewer than `k` other points repeat none and leave the
+/// row short, filled with `u32::MAX`. Points must be finite and fewer than `2^32 - 1`.
+pub fn knn(points: &[[f64; 3]], k: usize) -> Vec<u32> {
+    if points.is_empty() || k == 0 {
+        return Vec::new();
+    }
+    let tree: ImmutableKdTree<f64, u32, 3, 32> = ImmutableKdTree::new_from_slice(points);
+    let rows: Vec<Vec<u32>> = (0..points.len())
+        .into_par_iter()
+        .map(|i| {
+            let mut nb = nearest(&tree, points, i, k.min(points.len() - 1));
+            nb.resize(k, u32::MAX);
+            nb
+        })
+        .collect();
+    rows.concat()
+}
+
 /// The `k` nearest other points of point `i`, nearest first, ties by index.
 fn nearest(
     tree: &ImmutableKdTree<f64, u32, 3, 32>,

@@ -181,12 +181,53 @@ pub(super) fn pca_frame(points: impl Iterator<Item = [f64; 3]> + Clone, n: usize
     }
 }
 
+/// The frame of [`pca_frame`] turned to the plane normal to `normal` (unit): the first axis is
+/// the principal one projected into that plane (any perpendicular when it is parallel to
+/// `normal`), the second `normal × first`.
+fn facing_frame(pca: Frame, normal: [f64; 3]) -> Frame {
+    let along = |v: [f64; 3]| {
+        let d = dot(v, normal);
+        [
+            v[0] - d * normal[0],
+            v[1] - d * normal[1],
+            v[2] - d * normal[2],
+        ]
+    };
+    let unit = |v: [f64; 3]| {
+        let l = dot(v, v).sqrt();
+        (l > 1e-6).then(|| v.map(|x| x / l))
+    };
+    let first = unit(along(pca.axes[0]))
+        .or_else(|| unit(along(pca.axes[1])))
+        .or_else(|| unit(along([1.0, 0.0, 0.0])))
+        .or_else(|| unit(along([0.0, 1.0, 0.0])))
+        .unwrap_or([1.0, 0.0, 0.0]);
+    Frame {
+        centroid: pca.centroid,
+        axes: [first, cross(normal, first), normal],
+    }
+}
+
 /// Parameterise `points` over a rectangle in their best-fit plane by `method` (module docs).
 ///
 /// Errors: `graph` not of `points.len()` vertices (a caller's bug), fewer than 3 points, a
 /// coordinate that is not finite, points on one line, a spring method with `α` outside
 /// `[0, 1)` or `r` not finite, or a graph without a boundary vertex.
 pub fn parameterise(points: &[[f64; 3]], graph: &Graph, method: Method) -> Result<Param> {
+    parameterise_facing(points, graph, method, None)
+}
+
+/// [`parameterise`] over the plane normal to `normal` (a unit vector, e.g. the mean normal of
+/// a patch whose normals lie in a cone about it, over which it is a height field) instead of
+/// the best-fit plane; `None` is the best-fit plane. A strongly curved patch (a cap wrapped
+/// around a rim) can have a best-fit plane that it folds over when projected; the plane
+/// normal to the cone's axis never does where the normals stay within 90° of the axis.
+pub fn parameterise_facing(
+    points: &[[f64; 3]],
+    graph: &Graph,
+    method: Method,
+    normal: Option<[f64; 3]>,
+) -> Result<Param> {
     if graph.len() != points.len() {
         return Err(Error::Internal(format!(
             "parameterise: a graph of {} vertices for {} points",
@@ -205,7 +246,13 @@ pub fn parameterise(points: &[[f64; 3]], graph: &Graph, method: Method) -> Resul
             "point {i} of the patch has a coordinate that is not finite"
         )));
     }
-    let frame = pca_frame(points.iter().copied(), points.len());
+    let pca = pca_frame(points.iter().copied(), points.len());
+    let frame = match normal {
+        Some(n) if n.iter().all(|x| x.is_finite()) && (dot(n, n) - 1.0).abs() < 1e-6 => {
+            facing_frame(pca, n)
+        }
+        _ => pca,
+    };
     let proj: Vec<[f64; 2]> = points
         .iter()
         .map(|p| {

@@ -1,6 +1,6 @@
 //! `fit`: hierarchical B-spline surfaces written as IGES; OpenCascade reads them back with the
 //! deviations scanflow reports, interpolation, the same bytes for any thread count, terrain
-//! tiles that meet along their seams, real scans, and bad input.
+//! tiles that meet along their seams, closed objects patch by patch, real scans, and bad input.
 
 use std::path::{Path, PathBuf};
 
@@ -160,6 +160,146 @@ fn terrain_tiles_meet_along_their_seams() {
     );
 }
 
+/// The largest gap over a report's `patch_gaps`.
+fn largest_patch_gap(r: &serde_json::Value) -> f64 {
+    r["patch_gaps"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|g| f(g, "max_gap"))
+        .fold(0.0, f64::max)
+}
+
+#[test]
+fn closed_objects_are_fitted_patch_by_patch_and_read_back_alike() {
+    let d = tempfile::tempdir().unwrap();
+    let sphere = d.path().join("sphere.ply");
+    ok(&[
+        "synth",
+        "sphere",
+        "--points",
+        "8000",
+        "--noise",
+        "0.0002",
+        "-o",
+        s(&sphere),
+        "--progress",
+        "none",
+    ]);
+    let mut bytes = Vec::new();
+    let mut last = None;
+    for t in ["1", "2"] {
+        // The same file name: the IGES global section records it.
+        let dir = d.path().join(format!("t{t}"));
+        std::fs::create_dir(&dir).unwrap();
+        let igs = dir.join("s.igs");
+        let rep = dir.join("s.json");
+        let text = ok(&[
+            "fit",
+            s(&sphere),
+            "--patches",
+            "-o",
+            s(&igs),
+            "--tolerance",
+            "0.1%",
+            "--threads",
+            t,
+            "--report",
+            s(&rep),
+            "--progress",
+            "none",
+        ]);
+        assert!(text.contains("neighbouring patches"), "{text}");
+        bytes.push(std::fs::read(&igs).unwrap());
+        last = Some((igs, report(&rep)));
+    }
+    assert!(
+        bytes[0] == bytes[1],
+        "the IGES file differs between 1 and 2 threads"
+    );
+    let (igs, r) = last.unwrap();
+    let diag = f(&r, "diagonal");
+    let tol = f(&r, "tolerance");
+    // A sphere is no disc: several patches, every one within the tolerance, and every point
+    // counted once in the deviation although the overlaps fit some twice.
+    let n = r["surfaces"].as_u64().unwrap();
+    assert!(n >= 6, "{r}");
+    assert!(r["met"].as_bool().unwrap(), "{r}");
+    assert_eq!(r["input_points"].as_u64(), Some(8000), "{r}");
+    assert!(r["points"].as_u64().unwrap() > 8000, "{r}");
+    assert!(f(&r, "max_deviation") <= tol, "{r}");
+    // Neighbours share their overlap rings, and there the two surfaces are within two
+    // tolerances of each other: each is within one of the same points.
+    let gaps = r["patch_gaps"].as_array().unwrap();
+    assert!(gaps.len() as u64 >= n, "{r}");
+    assert!(largest_patch_gap(&r) <= 2.0 * tol, "{r}");
+    if !has_checker("fit_patches_occ") {
+        return;
+    }
+    let c = check(&igs, &sphere);
+    assert_eq!(c["surfaces"].as_u64(), Some(n), "{c}");
+    assert_eq!(c["no_projection"].as_u64(), Some(0), "{c}");
+    let occ_max = f(&c, "max");
+    assert!(
+        (occ_max - f(&r, "max_deviation")).abs() < 1e-6 * diag,
+        "max: OpenCascade {occ_max}, scanflow {}",
+        f(&r, "max_deviation")
+    );
+    assert!(
+        (f(&c, "rms") - f(&r, "rms_deviation")).abs() < 1e-6 * diag,
+        "{c} {r}"
+    );
+    assert_eq!(c["gmsh"]["ok"].as_bool(), Some(true), "{c}");
+    assert!(c["gmsh"]["warnings"].as_array().unwrap().is_empty(), "{c}");
+}
+
+#[test]
+fn a_closed_scan_and_a_store_fit_by_patches() {
+    let Some(zip) = shared("bunny/reconstruction/bun_zipper.ply") else {
+        return;
+    };
+    let d = tempfile::tempdir().unwrap();
+    let store = d.path().join("store");
+    ok(&[
+        "ingest",
+        s(&zip),
+        "-o",
+        s(&store),
+        "--max-cell-points",
+        "5000",
+        "--progress",
+        "none",
+    ]);
+    for (input, name) in [(&zip, "file"), (&store, "store")] {
+        let igs = d.path().join(format!("{name}.igs"));
+        let rep = d.path().join(format!("{name}.json"));
+        ok(&[
+            "fit",
+            s(input),
+            "--patches",
+            "-o",
+            s(&igs),
+            "--tolerance",
+            "0.3%",
+            "--report",
+            s(&rep),
+            "--progress",
+            "none",
+        ]);
+        let r = report(&rep);
+        let tol = f(&r, "tolerance");
+        assert!(r["met"].as_bool().unwrap(), "{name}: {r}");
+        assert_eq!(r["input_points"].as_u64(), Some(35_947), "{name}: {r}");
+        assert!(r["surfaces"].as_u64().unwrap() >= 10, "{name}: {r}");
+        assert!(largest_patch_gap(&r) <= 2.0 * tol, "{name}: {r}");
+        // A fit, not a copy: fewer control points than points.
+        assert!(
+            r["tensor_control_points"].as_u64().unwrap() < 35_947 / 2,
+            "{name}: {r}"
+        );
+    }
+}
+
 #[test]
 fn range_scan_uses_its_grid_and_meets_the_tolerance() {
     let Some(bun) = shared("bunny/bun000.ply") else {
@@ -220,12 +360,34 @@ fn bad_input_and_options_are_reported_before_or_without_a_hang() {
             vec!["--tolerance", "0.1%", "--max-level", "99"],
             "--max-level",
         ),
+        (
+            vec!["--tolerance", "0.1%", "--patches", "--patch-points", "10"],
+            "--patch-points",
+        ),
+        (
+            vec!["--tolerance", "0.1%", "--patches", "--patch-angle", "200"],
+            "--patch-angle",
+        ),
     ] {
         let mut a = vec!["fit", s(&hf), "-o", "x.igs"];
         a.extend(args);
         let e = usage(&a);
         assert!(e.contains(want), "{e}");
     }
+    // Clap's own conflict: exit 2, both options named.
+    let o = run(&[
+        "fit",
+        s(&hf),
+        "-o",
+        "x.igs",
+        "--tolerance",
+        "1",
+        "--patches",
+        "--tiles",
+    ]);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{e}");
+    assert!(e.contains("--patches") && e.contains("--tiles"), "{e}");
     let e = usage(&[
         "fit",
         s(&hf),
