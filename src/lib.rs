@@ -33,6 +33,7 @@ pub mod error;
 pub mod exec;
 pub mod extract;
 pub mod geom;
+pub mod hex;
 pub mod io;
 pub mod metrics;
 pub mod normals;

@@ -41,8 +41,10 @@ pub mod las;
 pub mod mesh_read;
 pub mod mesh_write;
 pub mod mmap;
+pub mod obj;
 pub mod ply;
 pub mod ply_write;
+pub mod volume;
 pub mod xyz;
 
 use std::path::{Path, PathBuf};

@@ -1,0 +1,141 @@
+//! The volume meshes the hex stage reads and writes: tetrahedra in, hexahedra out.
+//!
+//! # Conventions (stated once)
+//!
+//! * Coordinates are `f64` in input units; vertex indices are 0-based `u32`.
+//! * A tetrahedron `[a, b, c, d]` is positively oriented when
+//!   `det(b − a, c − a, d − a) > 0` (the right-hand rule: `d` lies on the side of triangle
+//!   `a b c` that its counter-clockwise normal points to). MEDIT, gmsh and VTK store
+//!   tetrahedra the same way.
+//! * A hexahedron `[v0 … v7]` follows VTK's `VTK_HEXAHEDRON` (12), which MEDIT's `Hexahedra`
+//!   and gmsh's element type 5 share: `v0 v1 v2 v3` is the bottom face, counter-clockwise
+//!   seen from the top, and `v4 … v7` the top face above them (`v4` over `v0`). For the unit
+//!   cube, `v0 = (0,0,0)`, `v1 = (1,0,0)`, `v2 = (1,1,0)`, `v3 = (0,1,0)`, `v4 = (0,0,1)`,
+//!   `v5 = (1,0,1)`, `v6 = (1,1,1)`, `v7 = (0,1,1)`; its scaled Jacobian is 1 everywhere.
+
+/// An orthonormal frame: `frame[k]` is the k-th axis in space (the direction in which the
+/// parameter `u`, `v` or `w` grows), a unit vector; right-handed (`frame[0] × frame[1] =
+/// frame[2]`). A frame field holds one per tetrahedron.
+pub type Frame = [[f64; 3]; 3];
+
+/// A tetrahedral mesh.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct TetMesh {
+    /// Vertex positions, input units.
+    pub verts: Vec<[f64; 3]>,
+    /// Tetrahedra as vertex indices, positively oriented once checked.
+    pub tets: Vec<[u32; 4]>,
+}
+
+/// A hexahedral mesh.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct HexMesh {
+    /// Vertex positions, input units.
+    pub verts: Vec<[f64; 3]>,
+    /// Hexahedra as vertex indices in VTK order (see the module docs).
+    pub hexes: Vec<[u32; 8]>,
+}
+
+/// Signed volume of the tetrahedron `a b c d`: `det(b − a, c − a, d − a) / 6`.
+pub fn tet_volume(a: [f64; 3], b: [f64; 3], c: [f64; 3], d: [f64; 3]) -> f64 {
+    let u = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
+    let v = [c[0] - a[0], c[1] - a[1], c[2] - a[2]];
+    let w = [d[0] - a[0], d[1] - a[1], d[2] - a[2]];
+    (u[0] * (v[1] * w[2] - v[2] * w[1]) - u[1] * (v[0] * w[2] - v[2] * w[0])
+        + u[2] * (v[0] * w[1] - v[1] * w[0]))
+        / 6.0
+}
+
+impl TetMesh {
+    /// The four corners of tetrahedron `t`.
+    pub fn corners(&self, t: usize) -> [[f64; 3]; 4] {
+        self.tets[t].map(|i| self.verts[i as usize])
+    }
+
+    /// Signed volume of tetrahedron `t`.
+    pub fn volume(&self, t: usize) -> f64 {
+        let [a, b, c, d] = self.corners(t);
+        tet_volume(a, b, c, d)
+    }
+}
+
+/// No neighbour (a boundary face) in [`tet_neighbours`].
+pub const NO_TET: u32 = u32::MAX;
+
+/// The face of a tetrahedron opposite its local vertex `i`, as local vertex indices, ordered
+/// so that its counter-clockwise normal points out of a positively oriented tetrahedron.
+pub const FACE_OPPOSITE: [[usize; 3]; 4] = [[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]];
+
+/// For each tetrahedron and each local vertex `i`, the tetrahedron across the face opposite
+/// `i` ([`FACE_OPPOSITE`]), or [`NO_TET`] on the boundary. A face shared by more than two
+/// tetrahedra (non-manifold) is reported as `Err((face's sorted vertices, its tetrahedra))`.
+pub fn tet_neighbours(m: &TetMesh) -> Result<Vec<[u32; 4]>, ([u32; 3], Vec<u32>)> {
+    let mut faces: Vec<([u32; 3], u32, u8)> = Vec::with_capacity(4 * m.tets.len());
+    for (t, tet) in m.tets.iter().enumerate() {
+        for (i, f) in FACE_OPPOSITE.iter().enumerate() {
+            let mut k = f.map(|j| tet[j]);
+            k.sort_unstable();
+            faces.push((k, t as u32, i as u8));
+        }
+    }
+    faces.sort_unstable();
+    let mut nb = vec![[NO_TET; 4]; m.tets.len()];
+    let mut s = 0;
+    while s < faces.len() {
+        let mut e = s + 1;
+        while e < faces.len() && faces[e].0 == faces[s].0 {
+            e += 1;
+        }
+        match e - s {
+            1 => {}
+            2 => {
+                let (a, b) = (faces[s], faces[s + 1]);
+                nb[a.1 as usize][a.2 as usize] = b.1;
+                nb[b.1 as usize][b.2 as usize] = a.1;
+            }
+            _ => return Err((faces[s].0, faces[s..e].iter().map(|f| f.1).collect())),
+        }
+        s = e;
+    }
+    Ok(nb)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_reference_tet_has_volume_one_sixth() {
+        let m = TetMesh {
+            verts: vec![[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+            tets: vec![[0, 1, 2, 3]],
+        };
+        assert!((m.volume(0) - 1.0 / 6.0).abs() < 1e-15);
+    }
+
+    #[test]
+    fn faces_opposite_point_outwards_and_neighbours_pair_up() {
+        // Two tets sharing face 1 2 3.
+        let m = TetMesh {
+            verts: vec![
+                [0.0; 3],
+                [1.0, 0.0, 0.0],
+                [0.0, 1.0, 0.0],
+                [0.0, 0.0, 1.0],
+                [1.0, 1.0, 1.0],
+            ],
+            tets: vec![[0, 1, 2, 3], [4, 1, 3, 2]],
+        };
+        assert!(m.volume(0) > 0.0 && m.volume(1) > 0.0);
+        for t in 0..2 {
+            let c = m.corners(t);
+            for (i, f) in FACE_OPPOSITE.iter().enumerate() {
+                // The opposite vertex lies behind the face's outward normal.
+                assert!(tet_volume(c[f[0]], c[f[1]], c[f[2]], c[i]) < 0.0);
+            }
+        }
+        let nb = tet_neighbours(&m).unwrap();
+        assert_eq!(nb[0], [1, NO_TET, NO_TET, NO_TET]);
+        assert_eq!(nb[1], [0, NO_TET, NO_TET, NO_TET]);
+    }
+}
