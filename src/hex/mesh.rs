@@ -66,10 +66,19 @@ pub const NO_TET: u32 = u32::MAX;
 /// so that its counter-clockwise normal points out of a positively oriented tetrahedron.
 pub const FACE_OPPOSITE: [[usize; 3]; 4] = [[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]];
 
+/// A face shared by more than two tetrahedra: its sorted vertices and the tetrahedra on it.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct NonManifoldFace {
+    /// The face's vertices, ascending.
+    pub vertices: [u32; 3],
+    /// The tetrahedra that have it as a face.
+    pub tets: Vec<u32>,
+}
+
 /// For each tetrahedron and each local vertex `i`, the tetrahedron across the face opposite
 /// `i` ([`FACE_OPPOSITE`]), or [`NO_TET`] on the boundary. A face shared by more than two
-/// tetrahedra (non-manifold) is reported as `Err((face's sorted vertices, its tetrahedra))`.
-pub fn tet_neighbours(m: &TetMesh) -> Result<Vec<[u32; 4]>, ([u32; 3], Vec<u32>)> {
+/// tetrahedra (non-manifold) is an error naming it.
+pub fn tet_neighbours(m: &TetMesh) -> Result<Vec<[u32; 4]>, NonManifoldFace> {
     let mut faces: Vec<([u32; 3], u32, u8)> = Vec::with_capacity(4 * m.tets.len());
     for (t, tet) in m.tets.iter().enumerate() {
         for (i, f) in FACE_OPPOSITE.iter().enumerate() {
@@ -93,7 +102,12 @@ pub fn tet_neighbours(m: &TetMesh) -> Result<Vec<[u32; 4]>, ([u32; 3], Vec<u32>)
                 nb[a.1 as usize][a.2 as usize] = b.1;
                 nb[b.1 as usize][b.2 as usize] = a.1;
             }
-            _ => return Err((faces[s].0, faces[s..e].iter().map(|f| f.1).collect())),
+            _ => {
+                return Err(NonManifoldFace {
+                    vertices: faces[s].0,
+                    tets: faces[s..e].iter().map(|f| f.1).collect(),
+                });
+            }
         }
         s = e;
     }

@@ -34,8 +34,12 @@
 //!
 //! The points, normals, neighbour lists and layout are admitted up front
 //! ([`BYTES_PER_POINT`]); patches are fitted in waves of at most one per thread whose
-//! [`fit::BYTES_PER_POINT`] admissions fit in the budget together. The layout, the overlap and
-//! every fit depend only on the store's points, so the file is the same for any thread count.
+//! [`fit::bytes_per_point`] admissions fit in the budget together. Each fit's sparse
+//! factorisations are checked (symbolically, before any is computed) against an equal share of
+//! what the budget had left when the fits began, one share per thread; a patch whose system
+//! needs more fails with a message naming it and the bytes. The layout, the overlap and every
+//! fit depend only on the store's points, so the file is the same for any thread count (only
+//! a patch near its share can fit with fewer threads and fail with more).
 
 use std::collections::BTreeMap;
 use std::num::NonZero;
@@ -223,16 +227,24 @@ fn fit_all(
 ) -> Result<Vec<Surface>> {
     let stage = ctx.progress.stage("fit", Some(ext.len() as u64), "patches");
     let threads = ctx.pool.current_num_threads().max(1);
+    // Each fit of a wave may factor within an equal share of what the budget has left.
+    let share =
+        ctx.budget.total().saturating_sub(ctx.budget.used()) / threads.min(ext.len()).max(1) as u64;
     let mut out: Vec<Surface> = Vec::with_capacity(ext.len());
     let mut next = 0;
     while next < ext.len() {
         let mut permits = Vec::new();
         let mut end = next;
         while end < ext.len() && end - next < threads {
-            let bytes = ext[end].len() as u64 * fit::BYTES_PER_POINT;
-            let what = "the fit of one patch";
+            let bytes = ext[end].len() as u64 * fit::bytes_per_point(job.method);
             let permit = if end == next {
-                Some(ctx.budget.acquire(bytes, what)?)
+                // This thread holds the run's other permits, so nothing frees while it waits:
+                // the patch fits in what is left now, or the run stops saying so.
+                let what = format!(
+                    "the fit of patch {end} ({} points; --patch-points bounds a patch)",
+                    ext[end].len()
+                );
+                Some(ctx.budget.acquire_now(bytes, &what)?)
             } else {
                 ctx.budget.try_acquire(bytes)
             };
@@ -247,7 +259,9 @@ fn fit_all(
                 .into_par_iter()
                 .map(|k| {
                     let pts: Vec<[f64; 3]> = ext[k].iter().map(|&i| pos[i as usize]).collect();
-                    fit_one(&pts, &[], facing[k], job, tolerance, dir)
+                    let factor =
+                        share.saturating_sub(pts.len() as u64 * fit::bytes_per_point(job.method));
+                    fit_one(&pts, &[], facing[k], job, tolerance, factor, dir)
                         .map_err(|e| in_patch(e, k, &pts))
                 })
                 .collect()

@@ -33,7 +33,7 @@ use rayon::prelude::*;
 
 use super::basis::GAUSS4;
 use super::hier::{Hierarchy, Leaf, LocalBasis, Support};
-use super::solve::{Triplets, cholesky, lu};
+use super::solve::{Triplets, cholesky, factor_bytes, lu};
 use super::tensor;
 use crate::types::TensorSurface;
 
@@ -63,6 +63,9 @@ pub struct FitParams {
     pub base_cells: usize,
     /// Local (hierarchical) or global refinement.
     pub refine: Refine,
+    /// Bytes the sparse factorisation may take ([`factor_bytes`], checked before each
+    /// factorisation); `u64::MAX`: unchecked. The driver derives it from `--mem`.
+    pub max_factor_bytes: u64,
 }
 
 impl Default for FitParams {
@@ -75,6 +78,7 @@ impl Default for FitParams {
             max_level: 10,
             base_cells: 4,
             refine: Refine::Local,
+            max_factor_bytes: u64::MAX,
         }
     }
 }
@@ -158,6 +162,36 @@ pub enum FitError {
     /// The linear system could not be factored.
     #[error("the fit's linear system could not be solved: {0}")]
     Solve(String),
+    /// The factorisation would take more memory than the fit may use.
+    #[error(
+        "the sparse factorisation of {unknowns} unknowns needs {}, more than the {} this surface may use under --mem: raise --mem, or loosen --tolerance, or lower --max-level, or split the points (--patches, --tiles)",
+        crate::exec::human_bytes(*need),
+        crate::exec::human_bytes(*limit)
+    )]
+    Memory {
+        /// Unknowns of the system.
+        unknowns: usize,
+        /// Bytes the factorisation needs.
+        need: u64,
+        /// Bytes it may use.
+        limit: u64,
+    },
+}
+
+/// Checks that factoring `a` fits in `limit` bytes (`u64::MAX`: no check).
+fn admit_factor(a: &mut Triplets, lu: bool, limit: u64) -> Result<(), FitError> {
+    if limit == u64::MAX {
+        return Ok(());
+    }
+    let need = factor_bytes(a, lu).map_err(FitError::Solve)?;
+    if need > limit {
+        return Err(FitError::Memory {
+            unknowns: a.n(),
+            need,
+            limit,
+        });
+    }
+    Ok(())
 }
 
 /// The points' parameters in the hierarchy's domain: the domain is the parameter rectangle
@@ -361,12 +395,14 @@ fn solve_penalty(
     uv: &[[f64; 2]],
     fair: &mut Triplets,
     omega: f64,
+    max_factor_bytes: u64,
 ) -> Result<Vec<[f64; 3]>, FitError> {
     let (mut a, rhs) = assemble_data(h, g, pts, uv);
     let ta = a.trace();
     let tf = fair.trace();
     let s = if tf > 0.0 { ta / tf } else { 1.0 };
     a.add_scaled(fair, omega * s);
+    admit_factor(&mut a, false, max_factor_bytes)?;
     match cholesky(&mut a, &rhs) {
         Ok(c) if c.iter().all(|c| c.iter().all(|x| x.is_finite())) => Ok(c),
         _ => {
@@ -389,6 +425,7 @@ fn solve_lagrange(
     pts: &[[f64; 3]],
     uv: &[[f64; 2]],
     fair: &Triplets,
+    max_factor_bytes: u64,
 ) -> Result<Vec<[f64; 3]>, FitError> {
     let n = h.len();
     let m = pts.len();
@@ -419,6 +456,7 @@ fn solve_lagrange(
             rhs[n + i] = pts[i];
         }
     }
+    admit_factor(&mut k, true, max_factor_bytes)?;
     let x = lu(&mut k, &rhs).map_err(FitError::Solve)?;
     Ok(x[..n].to_vec())
 }
@@ -479,9 +517,17 @@ pub fn fit(
                     continue;
                 }
             }
-            coef = solve_lagrange(&h, &g, &local, &par, &fair)?;
+            coef = solve_lagrange(&h, &g, &local, &par, &fair, params.max_factor_bytes)?;
         } else {
-            coef = solve_penalty(&h, &g, &local, &par, &mut fair, omega)?;
+            coef = solve_penalty(
+                &h,
+                &g,
+                &local,
+                &par,
+                &mut fair,
+                omega,
+                params.max_factor_bytes,
+            )?;
         }
         surface = h.to_tensor(&coef, [0.0; 3]);
         report.fairness_energy = energy(&fair, &coef);

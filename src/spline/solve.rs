@@ -62,6 +62,11 @@ impl Triplets {
         self.compacted = self.entries.len();
     }
 
+    /// Unknowns (rows and columns).
+    pub fn n(&self) -> usize {
+        self.n
+    }
+
     /// Number of stored entries (after [`Triplets::compact`], the nonzeros).
     pub fn len(&self) -> usize {
         self.entries.len()
@@ -139,6 +144,26 @@ fn columns(x: &Mat<f64>, n: usize) -> Vec<[f64; 3]> {
     (0..n).map(|i| [x[(i, 0)], x[(i, 1)], x[(i, 2)]]).collect()
 }
 
+/// Bytes a factor of `A` occupies, from the symbolic Cholesky factorisation of its lower
+/// triangle after the fill-reducing ordering (no numbers computed): 16 bytes per stored value
+/// of `L` (the value and its row index) and 64 per unknown for the ordering and workspace.
+/// `lu`: the LU factors of a matrix with `A`'s symmetric pattern take twice that (`L` and
+/// `U`, pivoting aside). The fit checks it against its budget before factoring.
+pub fn factor_bytes(a: &mut Triplets, lu: bool) -> Result<u64, String> {
+    use faer::sparse::linalg::cholesky::{SymmetricOrdering, factorize_symbolic_cholesky};
+    let n = a.n as u64;
+    let m = a.matrix()?;
+    let sym = factorize_symbolic_cholesky(
+        m.symbolic(),
+        Side::Lower,
+        SymmetricOrdering::Amd,
+        Default::default(),
+    )
+    .map_err(|e| format!("symbolic Cholesky failed: {e:?}"))?;
+    let l = sym.len_val() as u64 * 16;
+    Ok(if lu { 2 * l } else { l } + 64 * n)
+}
+
 /// Solves `A x = rhs` for a symmetric positive definite `A` given by its lower triangle.
 pub fn cholesky(a: &mut Triplets, rhs: &[[f64; 3]]) -> Result<Vec<[f64; 3]>, String> {
     let n = a.n;
@@ -188,6 +213,25 @@ mod tests {
                 assert!((x[i][d] - y[i][d]).abs() < 1e-12);
             }
         }
+    }
+
+    #[test]
+    fn factor_bytes_follow_the_fill() {
+        // A tridiagonal matrix factors without fill: n values of the diagonal, n - 1 below.
+        let n = 100;
+        let mut a = Triplets::new(n);
+        for i in 0..n {
+            a.push(i, i, 2.0);
+            if i > 0 {
+                a.push(i, i - 1, -1.0);
+            }
+        }
+        let b = factor_bytes(&mut a, false).unwrap();
+        assert!(
+            b >= (2 * n as u64 - 1) * 16 && b <= 64 * n as u64 + 3 * n as u64 * 16,
+            "{b}"
+        );
+        assert!(factor_bytes(&mut a, true).unwrap() > b);
     }
 
     #[test]

@@ -217,6 +217,24 @@ fn closed_objects_are_fitted_patch_by_patch_and_read_back_alike() {
         bytes[0] == bytes[1],
         "the IGES file differs between 1 and 2 threads"
     );
+    // A budget that holds the points but not one patch's fit stops with a message at once
+    // (a wait would never end: this thread holds the permits that would have to free).
+    let small = d.path().join("small.igs");
+    let e = usage(&[
+        "fit",
+        s(&sphere),
+        "--patches",
+        "-o",
+        s(&small),
+        "--tolerance",
+        "0.5%",
+        "--mem",
+        "2M",
+        "--progress",
+        "none",
+    ]);
+    assert!(e.contains("patch") && e.contains("--mem"), "{e}");
+    assert!(!small.exists());
     let (igs, r) = last.unwrap();
     let diag = f(&r, "diagonal");
     let tol = f(&r, "tolerance");
@@ -412,6 +430,27 @@ fn bad_input_and_options_are_reported_before_or_without_a_hang() {
         "none",
     ]);
     assert!(e.contains("not met") && e.contains("points in"), "{e}");
+    // A factorisation larger than --mem allows is refused before it is computed, naming the
+    // bytes; no file appears.
+    let igs = d.path().join("big.igs");
+    let e = fails(&[
+        "fit",
+        s(&hf),
+        "-o",
+        s(&igs),
+        "--tolerance",
+        "1e-7%",
+        "--interpolate",
+        "--mem",
+        "8M",
+        "--progress",
+        "none",
+    ]);
+    assert!(
+        e.contains("hf2000.ply") && e.contains("MiB") && e.contains("--mem"),
+        "{e}"
+    );
+    assert!(!igs.exists());
     // Too few points.
     let tiny = d.path().join("tiny.xyz");
     std::fs::write(&tiny, "0 0 0\n1 0 0\n").unwrap();
