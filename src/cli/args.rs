@@ -194,6 +194,52 @@ pub enum Cmd {
     /// write them as IGES (entity 128): one surface for a disc-like patch (a range scan, a
     /// height field), one per tile for terrain (--tiles).
     Fit(FitArgs),
+    /// Hexahedral mesh of a tetrahedral one by CubeCover (Nieser, Reitebuch, Polthier 2011):
+    /// frame field, singular edges, integer-grid parameterisation with greedy rounding, hex
+    /// extraction, relaxation; written only when no hexahedron is inverted.
+    Hexmesh(HexmeshArgs),
+    /// Quality of a hexahedral mesh (Verdict's measures); exit 1 when a hexahedron is inverted.
+    Hexcheck(HexcheckArgs),
+}
+
+/// `scanflow hexmesh`.
+#[derive(Args, Debug)]
+pub struct HexmeshArgs {
+    /// Tetrahedral mesh: MEDIT .mesh, gmsh .msh (4.1 or 2.2), VTK legacy .vtk.
+    pub input: PathBuf,
+    /// Output hexahedral mesh: .vtk, .mesh or .msh.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Frame field: constant (the coordinate axes: a polycube map), smooth (boundary-aligned
+    /// smooth frames), or meta:FILE (the frames of a coarse hexahedral meta-mesh in FILE).
+    #[arg(long, default_value = "smooth")]
+    pub frames: String,
+    /// Target hexahedron edge, in input units (default: a twentieth of the bounding box's
+    /// diagonal).
+    #[arg(long, allow_negative_numbers = true)]
+    pub scale: Option<f64>,
+    /// Skip the relaxation after extraction.
+    #[arg(long)]
+    pub no_relax: bool,
+    /// Write the mesh even when some hexahedra are inverted (still exit 1).
+    #[arg(long)]
+    pub keep_inverted: bool,
+    /// Write the run's figures (JSON) here.
+    #[arg(long)]
+    pub report: Option<PathBuf>,
+    /// Threads, memory, progress.
+    #[command(flatten)]
+    pub common: Common,
+}
+
+/// `scanflow hexcheck`.
+#[derive(Args, Debug)]
+pub struct HexcheckArgs {
+    /// Hexahedral mesh: .vtk, .mesh or .msh.
+    pub input: PathBuf,
+    /// Print JSON instead of the table.
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// `fit --fairness`.

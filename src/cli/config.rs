@@ -15,8 +15,8 @@ use scanflow::recon::DEPTHS;
 use scanflow::synth::Shape;
 
 use super::args::{
-    CheckArgs, Cli, Cmd, Common, DemoArgs, InfoArgs, IngestArgs, NormalOpts, ReconstructArgs,
-    SynthArgs,
+    CheckArgs, Cli, Cmd, Common, DemoArgs, HexcheckArgs, HexmeshArgs, InfoArgs, IngestArgs,
+    NormalOpts, ReconstructArgs, SynthArgs,
 };
 pub use super::fit::FitConfig;
 use super::paths;
@@ -51,6 +51,10 @@ pub enum Config {
     Reconstruct(ReconstructConfig),
     /// `scanflow check`.
     Check(CheckConfig),
+    /// `hexmesh`.
+    Hexmesh(HexmeshConfig),
+    /// `hexcheck`.
+    Hexcheck(HexcheckArgs),
     /// `scanflow info`.
     Info(InfoConfig),
     /// `scanflow demo`.
@@ -70,6 +74,8 @@ impl Config {
             Cmd::Reconstruct(a) => Config::Reconstruct(ReconstructConfig::new(a)?),
             Cmd::Check(a) => Config::Check(CheckConfig::new(a)),
             Cmd::Info(a) => Config::Info(InfoConfig::new(a)?),
+            Cmd::Hexmesh(a) => Config::Hexmesh(HexmeshConfig::new(a)?),
+            Cmd::Hexcheck(a) => Config::Hexcheck(a),
             Cmd::Demo(a) => Config::Demo(DemoConfig::new(a)?),
             Cmd::Filter(a) => Config::Spectral(SpectralConfig::filter(a)?),
             Cmd::Resample(a) => Config::Spectral(SpectralConfig::resample(a)?),
@@ -500,6 +506,67 @@ impl DemoConfig {
             run: RunConfig::new(&a.common)?,
             dir: a.output,
             points: a.points,
+        })
+    }
+}
+
+/// `scanflow hexmesh`.
+pub struct HexmeshConfig {
+    /// Threads, memory, progress.
+    pub run: RunConfig,
+    /// The run.
+    pub job: scanflow::pipeline::hexmesh::HexJob,
+    /// `--report`.
+    pub report: Option<PathBuf>,
+}
+
+/// The extensions of the volume meshes scanflow writes.
+const VOLUME_EXTS: &[&str] = &["vtk", "mesh", "msh"];
+
+impl HexmeshConfig {
+    fn new(a: HexmeshArgs) -> Result<HexmeshConfig> {
+        use scanflow::pipeline::hexmesh::{FrameChoice, HexJob};
+        let frames = match a.frames.as_str() {
+            "constant" => FrameChoice::Constant,
+            "smooth" => FrameChoice::Smooth,
+            s => match s.strip_prefix("meta:") {
+                Some(f) if !f.is_empty() => {
+                    let f = PathBuf::from(f);
+                    if !f.is_file() {
+                        bail!("--frames {s}: {} is not a file", f.display());
+                    }
+                    FrameChoice::Meta(f)
+                }
+                _ => bail!(
+                    "--frames {s}: expected constant, smooth or meta:FILE (a hexahedral meta-mesh)"
+                ),
+            },
+        };
+        if let Some(x) = a.scale
+            && !(x.is_finite() && x > 0.0)
+        {
+            bail!("--scale {x}: the hexahedron edge must be a positive number of input units");
+        }
+        if !a.input.is_file() {
+            bail!("{}: no such file", a.input.display());
+        }
+        paths::output_file_as("-o", &a.output, VOLUME_EXTS, "a hexahedral mesh")?;
+        paths::not_an_input(&a.output, &[a.input.as_path()])?;
+        if let Some(r) = &a.report {
+            paths::output_file_as("--report", r, &["json"], "JSON")?;
+            paths::not_an_input(r, &[a.input.as_path()])?;
+        }
+        Ok(HexmeshConfig {
+            run: RunConfig::new(&a.common)?,
+            job: HexJob {
+                input: a.input,
+                output: a.output,
+                frames,
+                scale: a.scale,
+                relax: !a.no_relax,
+                keep_inverted: a.keep_inverted,
+            },
+            report: a.report,
         })
     }
 }

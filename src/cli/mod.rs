@@ -31,6 +31,7 @@ mod check;
 mod demo;
 mod fit;
 mod fit_tiles;
+mod hex;
 mod info;
 mod ingest;
 mod paths;
@@ -56,6 +57,8 @@ pub fn run(config: Config) -> Result<()> {
         Config::Demo(c) => demo::run(&c, &start(&c.run)?),
         Config::Spectral(c) => spectral::run(&c, &start(&c.run)?),
         Config::Fit(c) => fit::run(&c, &start(&c.run)?),
+        Config::Hexmesh(c) => hex::run(&c, &start(&c.run)?),
+        Config::Hexcheck(a) => hex::check(&a),
     }
 }
 

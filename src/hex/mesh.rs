@@ -47,6 +47,50 @@ pub fn tet_volume(a: [f64; 3], b: [f64; 3], c: [f64; 3], d: [f64; 3]) -> f64 {
 }
 
 impl TetMesh {
+    /// The box `[0, n₀h] × [0, n₁h] × [0, n₂h]` as `n₀n₁n₂` cubes of edge `h`, each split into
+    /// six tetrahedra around its main diagonal (Kuhn's subdivision: conforming between
+    /// cubes), positively oriented.
+    pub fn grid_box(n: [usize; 3], h: f64) -> TetMesh {
+        let id = |i: usize, j: usize, k: usize| (i + (n[0] + 1) * (j + (n[1] + 1) * k)) as u32;
+        let mut verts = Vec::with_capacity((n[0] + 1) * (n[1] + 1) * (n[2] + 1));
+        for k in 0..=n[2] {
+            for j in 0..=n[1] {
+                for i in 0..=n[0] {
+                    verts.push([i as f64 * h, j as f64 * h, k as f64 * h]);
+                }
+            }
+        }
+        let perms = [
+            [0, 1, 2],
+            [0, 2, 1],
+            [1, 0, 2],
+            [1, 2, 0],
+            [2, 0, 1],
+            [2, 1, 0],
+        ];
+        let mut tets = Vec::with_capacity(6 * n[0] * n[1] * n[2]);
+        for k in 0..n[2] {
+            for j in 0..n[1] {
+                for i in 0..n[0] {
+                    for p in perms {
+                        let mut at = [i, j, k];
+                        let mut tet = [id(i, j, k); 4];
+                        for (s, &axis) in p.iter().enumerate() {
+                            at[axis] += 1;
+                            tet[s + 1] = id(at[0], at[1], at[2]);
+                        }
+                        let c = tet.map(|v| verts[v as usize]);
+                        if tet_volume(c[0], c[1], c[2], c[3]) < 0.0 {
+                            tet.swap(2, 3);
+                        }
+                        tets.push(tet);
+                    }
+                }
+            }
+        }
+        TetMesh { verts, tets }
+    }
+
     /// The four corners of tetrahedron `t`.
     pub fn corners(&self, t: usize) -> [[f64; 3]; 4] {
         self.tets[t].map(|i| self.verts[i as usize])

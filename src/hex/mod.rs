@@ -8,9 +8,25 @@
 //! ```
 //!
 //! * [`mesh`]: the tetrahedral and hexahedral meshes and their orientation conventions.
+//! * [`rotation`]: the 24 cube rotations, matchings between frames, edge holonomy (§2.1–2.2).
+//! * [`topology`]: the checks of an input tetrahedral mesh (named elements) and edge stars.
+//! * [`frames`]: constant and meta-mesh frames, matchings, singular edges and invalid
+//!   configurations (§2.2, §3.2).
+//! * [`smooth_frames`]: boundary-aligned smooth frames (L4 spherical harmonics).
+//! * [`param`]: the integer-grid parameterisation with greedy rounding (§3.1).
+//! * [`quality`]: Verdict's element measures.
+//! * [`stuffing`], [`winding`]: tetrahedra of a closed surface's inside (isosurface stuffing
+//!   with the generalised winding number).
+//! * [`extract`]: hexahedra from an integer-grid map by walks from cube centres to corners.
+//! * [`relax`]: relaxation of the extracted mesh towards ideal cubes, boundary on the surface.
 
+pub mod extract;
+pub mod frames;
 pub mod mesh;
+pub mod param;
 pub mod quality;
+pub mod relax;
+pub mod rotation;
 pub mod smooth_frames;
 pub mod stuffing;
 pub mod topology;

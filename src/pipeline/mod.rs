@@ -16,6 +16,7 @@ pub mod fit;
 pub mod fit_patches;
 pub mod fit_tiles;
 mod global;
+pub mod hexmesh;
 pub mod ingest;
 mod points;
 pub mod reconstruct;

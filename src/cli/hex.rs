@@ -1,0 +1,80 @@
+//! `scanflow hexmesh` and `scanflow hexcheck`: hexahedra by CubeCover, and their quality.
+
+use anyhow::{Result, bail};
+
+use scanflow::exec::Ctx;
+use scanflow::hex::quality::mesh_quality;
+use scanflow::pipeline::hexmesh::hexmesh;
+
+use super::args::HexcheckArgs;
+use super::config::HexmeshConfig;
+
+/// Mesh, print the summary and the quality table; exit 1 when hexahedra are inverted (they
+/// were written only under `--keep-inverted`).
+pub fn run(c: &HexmeshConfig, ctx: &Ctx) -> Result<()> {
+    let st = hexmesh(&c.job, ctx)?;
+    if let Some(p) = &c.report {
+        let text = serde_json::to_string_pretty(&st)?;
+        scanflow::io::atomic::write(p, text.as_bytes(), scanflow::io::atomic::Durability::Synced)?;
+    }
+    let [v3, v5, v6] = st.singular_by_valence;
+    outln!(
+        "{} tetrahedra → {} hexahedra ({} vertices) at edge {:.6}",
+        st.tets,
+        st.quality.hexes,
+        st.extract.vertices,
+        st.scale
+    );
+    outln!(
+        "singular edges: {v3} of valence 3, {v5} of valence 5, {v6} of valence 2 or 6; {} nodes",
+        st.singularities.nodes.len()
+    );
+    outln!(
+        "parameterisation: {} unknowns ({} integer), {} rounding rounds, alignment energy {:.4e} → {:.4e}",
+        st.param.unknowns,
+        st.param.integer_unknowns,
+        st.param.rounds,
+        st.param.energy_continuous,
+        st.param.energy_final
+    );
+    let s = st.seconds;
+    outln!(
+        "time: read {:.2} s, frames {:.2} s, parameterisation {:.2} s, extraction {:.2} s, relaxation {:.2} s",
+        s[0],
+        s[1],
+        s[2],
+        s[3],
+        s[4]
+    );
+    outln!("{}", st.quality.table());
+    outln!("wrote {}", c.job.output.display());
+    if st.quality.inverted > 0 {
+        bail!(
+            "{}: {} of {} hexahedra are inverted",
+            c.job.output.display(),
+            st.quality.inverted,
+            st.quality.hexes
+        );
+    }
+    Ok(())
+}
+
+/// Print the quality of a hexahedral mesh; exit 1 when a hexahedron is inverted.
+pub fn check(a: &HexcheckArgs) -> Result<()> {
+    let hexes = scanflow::io::volume::read(&a.input)?.into_hex_mesh(&a.input)?;
+    let q = mesh_quality(&hexes);
+    if a.json {
+        outln!("{}", serde_json::to_string(&q)?);
+    } else {
+        outln!("{}", q.table());
+    }
+    if q.inverted > 0 {
+        bail!(
+            "{}: {} of {} hexahedra are inverted (scaled Jacobian ≤ 0)",
+            a.input.display(),
+            q.inverted,
+            q.hexes
+        );
+    }
+    Ok(())
+}

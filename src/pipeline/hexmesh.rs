@@ -1,0 +1,229 @@
+//! `hexmesh`: a tetrahedral mesh to hexahedra by CubeCover ([`crate::hex`]): read and check
+//! the tetrahedra, make the frame field, classify its singular edges (an invalid one stops
+//! the run, named), parameterise with greedy rounding, extract the hexahedra, relax them and
+//! measure their quality; then write them (only when none is inverted, unless asked).
+//!
+//! Every failure names the input file and the element: the tetrahedron that is inverted or
+//! not manifold, the singular edge whose holonomy no hex mesh has, the rounding that made
+//! tetrahedra flip in parameter space, the hexahedra that came out inverted.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use crate::error::{Error, Result};
+use crate::exec::Ctx;
+use crate::hex::extract::{ExtractReport, extract};
+use crate::hex::frames::{self, Singularities};
+use crate::hex::mesh::{HexMesh, TetMesh};
+use crate::hex::param::{ParamParams, ParamReport, parameterise};
+use crate::hex::quality::{MeshQuality, mesh_quality};
+use crate::hex::relax::{RelaxParams, RelaxReport, relax};
+use crate::hex::smooth_frames::{SmoothParams, SmoothReport, smooth_frames};
+use crate::hex::topology::{Topology, check_tets};
+
+/// Where the frames come from (§3.2).
+#[derive(Clone, Debug, PartialEq)]
+pub enum FrameChoice {
+    /// The coordinate axes everywhere (a polycube map).
+    Constant,
+    /// Boundary-aligned smooth frames.
+    Smooth,
+    /// The frames of a coarse hexahedral meta-mesh in this file.
+    Meta(PathBuf),
+}
+
+/// One `hexmesh` run.
+#[derive(Clone, Debug)]
+pub struct HexJob {
+    /// The tetrahedral mesh (`.mesh`, `.msh`, `.vtk`).
+    pub input: PathBuf,
+    /// The hexahedral mesh to write (`.vtk`, `.mesh`, `.msh`).
+    pub output: PathBuf,
+    /// The frame field.
+    pub frames: FrameChoice,
+    /// Target hex edge in input units; `None`: a twentieth of the bounding box's diagonal.
+    pub scale: Option<f64>,
+    /// Relax the hexahedra after extraction.
+    pub relax: bool,
+    /// Write the mesh even when some hexahedra are inverted.
+    pub keep_inverted: bool,
+}
+
+/// What a run measured.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct HexStats {
+    /// Tetrahedra read.
+    pub tets: usize,
+    /// Target hex edge used.
+    pub scale: f64,
+    /// The smooth field's figures, when it was made.
+    pub smooth: Option<SmoothReport>,
+    /// The singularity graph.
+    pub singularities: Singularities,
+    /// Singular edges of valence 3, 5 and 6.
+    pub singular_by_valence: [usize; 3],
+    /// The parameterisation.
+    pub param: ParamReport,
+    /// The extraction.
+    pub extract: ExtractReport,
+    /// The relaxation, when it ran.
+    pub relax: Option<RelaxReport>,
+    /// The written mesh's quality.
+    pub quality: MeshQuality,
+    /// Seconds per step: read and check, frames, parameterisation, extraction, relaxation.
+    pub seconds: [f64; 5],
+}
+
+/// Reads `path` as a tetrahedral mesh and checks it, errors naming the file and element.
+pub fn read_tets(path: &Path) -> Result<(TetMesh, Topology)> {
+    let mesh = crate::io::volume::read(path)?.into_tet_mesh(path)?;
+    let topo = check_tets(&mesh).map_err(|e| Error::input(path, e.to_string()))?;
+    Ok((mesh, topo))
+}
+
+fn diagonal(verts: &[[f64; 3]]) -> f64 {
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    for p in verts {
+        for r in 0..3 {
+            lo[r] = lo[r].min(p[r]);
+            hi[r] = hi[r].max(p[r]);
+        }
+    }
+    (0..3).map(|r| (hi[r] - lo[r]).powi(2)).sum::<f64>().sqrt()
+}
+
+/// Runs `job` (module docs).
+pub fn hexmesh(job: &HexJob, ctx: &Ctx) -> Result<HexStats> {
+    let path = &job.input;
+    let mut seconds = [0.0; 5];
+    let clock = Instant::now();
+    let (mesh, topo) = read_tets(path)?;
+    seconds[0] = clock.elapsed().as_secs_f64();
+    let scale = job.scale.unwrap_or_else(|| diagonal(&mesh.verts) / 20.0);
+
+    let clock = Instant::now();
+    let (field, smooth) = match &job.frames {
+        FrameChoice::Constant => (frames::constant_frames(mesh.tets.len()), None),
+        FrameChoice::Smooth => {
+            let (f, r) = ctx
+                .pool
+                .install(|| smooth_frames(&mesh, &topo.neighbours, &SmoothParams::default()))
+                .map_err(|e| Error::input(path, format!("smooth frames: {e}")))?;
+            (f, Some(r))
+        }
+        FrameChoice::Meta(meta) => {
+            let hexes: HexMesh = crate::io::volume::read(meta)?.into_hex_mesh(meta)?;
+            let f = frames::meta_frames(&mesh, &hexes)
+                .map_err(|e| Error::input(meta, e.to_string()))?;
+            (f, None)
+        }
+    };
+    let m = frames::matchings(&field, &topo);
+    let sing = frames::singularities(&mesh, &topo, &field, &m);
+    seconds[1] = clock.elapsed().as_secs_f64();
+    if let Some(first) = sing.invalid.first() {
+        return Err(Error::input(
+            path,
+            format!(
+                "the frame field has {} configuration(s) no hexahedral mesh has; the first: {first}; try --frames constant or a meta-mesh (--frames meta:FILE)",
+                sing.invalid.len()
+            ),
+        ));
+    }
+
+    let clock = Instant::now();
+    let (map, param) = parameterise(
+        &mesh,
+        &topo,
+        &field,
+        &m,
+        &sing.edges,
+        &ParamParams {
+            scale,
+            ..ParamParams::default()
+        },
+    )
+    .map_err(|e| Error::input(path, e.to_string()))?;
+    seconds[2] = clock.elapsed().as_secs_f64();
+    if param.flipped_final > 0 {
+        let cause = match &param.first_flip {
+            Some(c) => format!(
+                "; the first flips came with rounding round {} ({}), tetrahedra {:?}",
+                c.round,
+                c.fixed
+                    .iter()
+                    .map(|(what, k)| format!("{what} to {k}"))
+                    .collect::<Vec<_>>()
+                    .join(", "),
+                c.tets
+            ),
+            None => format!(
+                "; {} were flipped before any rounding: the frame field does not fit the shape at scale {scale}",
+                param.flipped_continuous
+            ),
+        };
+        return Err(Error::input(
+            path,
+            format!(
+                "the parameterisation flips {} of {} tetrahedra, so no valid hexahedra can be extracted{cause}; try a larger --scale or other --frames",
+                param.flipped_final,
+                mesh.tets.len()
+            ),
+        ));
+    }
+
+    let clock = Instant::now();
+    let (mut hexes, ext) = extract(&mesh, &map).map_err(|e| Error::input(path, e.to_string()))?;
+    seconds[3] = clock.elapsed().as_secs_f64();
+    if hexes.hexes.is_empty() {
+        return Err(Error::input(
+            path,
+            format!("no hexahedron fits inside at --scale {scale}: choose a smaller --scale"),
+        ));
+    }
+
+    let clock = Instant::now();
+    let relaxed = job.relax.then(|| {
+        let tris = topo.boundary_triangles(&mesh);
+        ctx.pool
+            .install(|| relax(&mut hexes, &mesh.verts, &tris, &RelaxParams::default()))
+    });
+    seconds[4] = clock.elapsed().as_secs_f64();
+
+    let quality = ctx.pool.install(|| mesh_quality(&hexes));
+    if quality.inverted > 0 && !job.keep_inverted {
+        let worst: Vec<String> = quality
+            .worst_hexes
+            .iter()
+            .take(5)
+            .map(|w| format!("{} ({:.3})", w.hex, w.scaled_jacobian))
+            .collect();
+        return Err(Error::input(
+            path,
+            format!(
+                "{} of {} hexahedra are inverted (scaled Jacobian ≤ 0), worst: {}; nothing written (--keep-inverted writes them anyway)",
+                quality.inverted,
+                quality.hexes,
+                worst.join(", ")
+            ),
+        ));
+    }
+    let sj: Vec<f64> = crate::hex::quality::hex_qualities(&hexes)
+        .iter()
+        .map(|q| q.min_scaled_jacobian)
+        .collect();
+    crate::io::volume::write_hex(&job.output, &hexes, &[("scaled_jacobian", &sj)])?;
+    Ok(HexStats {
+        tets: mesh.tets.len(),
+        scale,
+        smooth,
+        singular_by_valence: sing.by_valence(),
+        singularities: sing,
+        param,
+        extract: ext,
+        relax: relaxed,
+        quality,
+        seconds,
+    })
+}

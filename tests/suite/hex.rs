@@ -1,0 +1,197 @@
+//! `hexmesh` and `hexcheck` end to end: a box meshed by CubeCover and read back by an
+//! independent checker (meshio and gmsh through `scripts/hex_check.py`), the frame field's
+//! failures reported on a real mesh, and bad input named.
+
+use std::path::Path;
+use std::process::Command;
+
+use scanflow::hex::mesh::{HexMesh, TetMesh};
+
+use super::common::*;
+
+/// `scripts/hex_check.py MESH [--reference REF]`, parsed; `None` (with the reason printed)
+/// when meshio is not installed.
+fn hex_check(mesh: &Path, reference: Option<&Path>) -> Option<serde_json::Value> {
+    let mut cmd = Command::new("python3");
+    cmd.arg(concat!(env!("CARGO_MANIFEST_DIR"), "/scripts/hex_check.py"))
+        .arg(mesh);
+    if let Some(r) = reference {
+        cmd.arg("--reference").arg(r);
+    }
+    let o = cmd.output().ok()?;
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap_or_else(|e| {
+        panic!(
+            "hex_check.py: {e}\n{}\n{}",
+            String::from_utf8_lossy(&o.stdout),
+            String::from_utf8_lossy(&o.stderr)
+        )
+    });
+    if let Some(r) = v.get("skipped") {
+        eprintln!("skipped (hex_check.py): {r}");
+        return None;
+    }
+    assert!(o.status.success(), "{v}");
+    Some(v)
+}
+
+/// A 4.4 × 2.7 × 2.6 box of 144 tetrahedra.
+fn write_box(path: &Path) {
+    let mut m = TetMesh::grid_box([4, 3, 2], 1.0);
+    for p in &mut m.verts {
+        *p = [p[0] * 1.1, p[1] * 0.9, p[2] * 1.3];
+    }
+    scanflow::io::volume::write_tet(path, &m, &[]).unwrap();
+}
+
+#[test]
+fn a_box_becomes_cubes_and_independent_readers_agree() {
+    let d = tempfile::tempdir().unwrap();
+    let input = d.path().join("box.mesh");
+    write_box(&input);
+    for (frames, ext) in [("smooth", "vtk"), ("constant", "msh"), ("smooth", "mesh")] {
+        let out = d.path().join(format!("box_{frames}.{ext}"));
+        let rep = d.path().join(format!("box_{frames}_{ext}.json"));
+        let text = ok(&[
+            "hexmesh",
+            s(&input),
+            "-o",
+            s(&out),
+            "--frames",
+            frames,
+            "--scale",
+            "0.5",
+            "--report",
+            s(&rep),
+            "--progress",
+            "none",
+        ]);
+        assert!(text.contains("scaled Jacobian"), "{text}");
+        let r: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&rep).unwrap()).unwrap();
+        // A box needs no singular edge: the smooth field's singular graph is empty.
+        assert_eq!(
+            r["singular_by_valence"],
+            serde_json::json!([0, 0, 0]),
+            "{r}"
+        );
+        assert_eq!(r["param"]["flipped_final"].as_u64(), Some(0), "{r}");
+        // 4.4 / 0.5 → 9, 2.7 / 0.5 → 5, 2.6 / 0.5 → 5 cells; the hexes fill the box exactly.
+        assert_eq!(r["quality"]["hexes"].as_u64(), Some(225), "{r}");
+        assert_eq!(r["quality"]["inverted"].as_u64(), Some(0), "{r}");
+        let vol = r["quality"]["total_volume"].as_f64().unwrap();
+        assert!((vol - 4.4 * 2.7 * 2.6).abs() < 1e-9, "{vol}");
+        assert!(r["quality"]["min_sj"].as_f64().unwrap() > 0.99, "{r}");
+        // hexcheck reads it back.
+        let q = ok(&["hexcheck", s(&out), "--json"]);
+        let q: serde_json::Value = serde_json::from_str(&q).unwrap();
+        assert_eq!(q["hexes"].as_u64(), Some(225), "{q}");
+        let Some(c) = hex_check(&out, Some(&input)) else {
+            continue;
+        };
+        assert_eq!(c["hexes"].as_u64(), Some(225), "{c}");
+        assert!(c["scaled_jacobian"]["min"].as_f64().unwrap() > 0.99, "{c}");
+        assert_eq!(c["scaled_jacobian"]["count_le_0"].as_u64(), Some(0), "{c}");
+        assert_eq!(c["boundary"]["closed"].as_bool(), Some(true), "{c}");
+        // The hex boundary lies on the box's.
+        assert!(c["reference"]["max"].as_f64().unwrap() < 1e-9, "{c}");
+        if ext == "msh"
+            && let Some(g) = c["gmsh"]["min_sj_hex"].as_f64()
+        {
+            assert!(g > 0.99, "{c}");
+        }
+    }
+}
+
+#[test]
+fn hexcheck_exits_non_zero_on_an_inverted_hex() {
+    let d = tempfile::tempdir().unwrap();
+    let path = d.path().join("bad.vtk");
+    let mut verts: Vec<[f64; 3]> = vec![
+        [0., 0., 0.],
+        [1., 0., 0.],
+        [1., 1., 0.],
+        [0., 1., 0.],
+        [0., 0., 1.],
+        [1., 0., 1.],
+        [1., 1., 1.],
+        [0., 1., 1.],
+    ];
+    // Push one top corner through the bottom face.
+    verts[6] = [1.0, 1.0, -0.5];
+    let m = HexMesh {
+        verts,
+        hexes: vec![[0, 1, 2, 3, 4, 5, 6, 7]],
+    };
+    scanflow::io::volume::write_hex(&path, &m, &[]).unwrap();
+    let e = fails(&["hexcheck", s(&path)]);
+    assert!(e.contains("bad.vtk") && e.contains("inverted"), "{e}");
+}
+
+#[test]
+fn bad_tetrahedra_and_options_are_named() {
+    let d = tempfile::tempdir().unwrap();
+    let out = d.path().join("o.vtk");
+    // An inverted tetrahedron: two corners swapped.
+    let mut m = TetMesh::grid_box([1, 1, 1], 1.0);
+    m.tets[3].swap(0, 1);
+    let inv = d.path().join("inverted.mesh");
+    scanflow::io::volume::write_tet(&inv, &m, &[]).unwrap();
+    let e = fails(&["hexmesh", s(&inv), "-o", s(&out), "--progress", "none"]);
+    assert!(
+        e.contains("inverted.mesh") && e.contains("tetrahedron 3"),
+        "{e}"
+    );
+    // An open boundary is impossible for tets; a non-manifold face is not: three tets on
+    // one face.
+    let nm = TetMesh {
+        verts: vec![
+            [0., 0., 0.],
+            [1., 0., 0.],
+            [0., 1., 0.],
+            [0., 0., 1.],
+            [0.2, 0.2, 1.0],
+            [0.3, 0.1, 0.9],
+        ],
+        tets: vec![[0, 1, 2, 3], [0, 1, 2, 4], [0, 1, 2, 5]],
+    };
+    let nmp = d.path().join("nonmanifold.mesh");
+    scanflow::io::volume::write_tet(&nmp, &nm, &[]).unwrap_or(());
+    if nmp.exists() {
+        let e = fails(&["hexmesh", s(&nmp), "-o", s(&out), "--progress", "none"]);
+        assert!(e.contains("nonmanifold.mesh"), "{e}");
+    }
+    // A .mesh without its Tetrahedra section.
+    let missing = d.path().join("missing.mesh");
+    std::fs::write(
+        &missing,
+        "MeshVersionFormatted 2\nDimension 3\nVertices\n1\n0 0 0 0\nEnd\n",
+    )
+    .unwrap();
+    let e = fails(&["hexmesh", s(&missing), "-o", s(&out), "--progress", "none"]);
+    assert!(e.contains("missing.mesh"), "{e}");
+    assert!(!out.exists());
+    // Options checked before any work.
+    let e = usage(&["hexmesh", s(&missing), "-o", s(&out), "--scale", "-1"]);
+    assert!(e.contains("--scale"), "{e}");
+    let e = usage(&["hexmesh", s(&missing), "-o", s(&out), "--frames", "wavy"]);
+    assert!(e.contains("--frames"), "{e}");
+    let e = usage(&["hexmesh", s(&missing), "-o", s(&d.path().join("o.ply"))]);
+    assert!(e.contains("o.ply"), "{e}");
+}
+
+#[test]
+fn a_field_no_hex_mesh_has_is_reported_not_passed_on() {
+    // The coarse octopus (1140 tetrahedra): its smooth field has singular edges across the
+    // frames' axes; the run names one and writes nothing.
+    let Some(oct) = shared("tetmesh/octopus-low.mesh") else {
+        return;
+    };
+    let d = tempfile::tempdir().unwrap();
+    let out = d.path().join("o.vtk");
+    let e = fails(&["hexmesh", s(&oct), "-o", s(&out), "--progress", "none"]);
+    assert!(
+        e.contains("octopus-low.mesh") && (e.contains("edge") || e.contains("flips")),
+        "{e}"
+    );
+    assert!(!out.exists());
+}
