@@ -74,6 +74,8 @@ distance.
 """
 
 import argparse
+import contextlib
+import io
 import json
 import math
 import os
@@ -166,6 +168,16 @@ def _json_default(x):
         return x.item()
     except AttributeError:
         raise TypeError(f"not JSON serialisable: {type(x)}")
+
+
+def meshio_read(meshio, path):
+    """meshio.read, its messages kept off standard output and its sys.exit made an error."""
+    buf = io.StringIO()
+    try:
+        with contextlib.redirect_stdout(buf), contextlib.redirect_stderr(buf):
+            return meshio.read(path)
+    except SystemExit:
+        raise RuntimeError(" ".join(buf.getvalue().split()) or "meshio gave up") from None
 
 
 def fail(msg):
@@ -310,27 +322,40 @@ def point_triangle_distance(np, p, a, b, c):
 
 
 def distances_to(np, cKDTree, query, pts, tris, rng):
-    """Exact distance from each query point to the nearest of triangles `tris` of `pts`."""
+    """Exact distance from each query point to the nearest of triangles `tris` of `pts`.
+
+    An upper bound per query comes from a dense sample of the triangles; the candidates are
+    then the triangles whose bounding sphere (centroid, radius) reaches within that bound,
+    found with one k-d tree of centroids per power-of-two class of radii (so that a few
+    large triangles do not make every triangle a candidate everywhere).
+    """
     a, b, c = pts[tris[:, 0]], pts[tris[:, 1]], pts[tris[:, 2]]
     cen = (a + b + c) / 3.0
-    rad = np.max(
-        np.stack([np.linalg.norm(x - cen, axis=1) for x in (a, b, c)], axis=1), axis=1
+    rad = np.max(np.stack([np.linalg.norm(x - cen, axis=1) for x in (a, b, c)], axis=1), axis=1)
+    dense = np.concatenate(
+        [pts[np.unique(tris)], cen, sample_triangles(np, pts, tris, 4 * len(tris), rng)]
     )
-    # An upper bound per query: the distance to a dense sample of the triangles.
-    dense = np.concatenate([pts[np.unique(tris)], cen, sample_triangles(np, pts, tris, 4 * len(tris), rng)])
     upper, _ = cKDTree(dense).query(query)
-    tree = cKDTree(cen)
-    out = np.empty(len(query))
-    rmax = rad.max()
-    for s in range(0, len(query), 4096):
-        q = query[s : s + 4096]
-        cand = tree.query_ball_point(q, upper[s : s + 4096] + rmax + 1e-12)
-        qi = np.repeat(np.arange(len(q)), [len(x) for x in cand])
-        ti = np.fromiter((t for x in cand for t in x), dtype=np.int64, count=len(qi))
-        d = point_triangle_distance(np, q[qi], a[ti], b[ti], c[ti])
-        best = np.full(len(q), np.inf)
-        np.minimum.at(best, qi, d)
-        out[s : s + 4096] = np.minimum(best, upper[s : s + 4096])
+    with np.errstate(divide="ignore"):
+        cls = np.floor(np.log2(np.maximum(rad, 1e-300))).astype(np.int64)
+    classes = []
+    for k in np.unique(cls):
+        idx = np.nonzero(cls == k)[0]
+        classes.append((idx, cKDTree(cen[idx]), rad[idx].max()))
+    out = np.minimum(upper, np.inf)
+    step = 4096
+    for s in range(0, len(query), step):
+        q = query[s : s + step]
+        best = out[s : s + step].copy()
+        for idx, tree, rmax in classes:
+            cand = tree.query_ball_point(q, best + rmax + 1e-12)
+            qi = np.repeat(np.arange(len(q)), [len(x) for x in cand])
+            if len(qi) == 0:
+                continue
+            ti = idx[np.fromiter((t for x in cand for t in x), dtype=np.int64, count=len(qi))]
+            d = point_triangle_distance(np, q[qi], a[ti], b[ti], c[ti])
+            np.minimum.at(best, qi, d)
+        out[s : s + step] = best
     return out
 
 
@@ -340,7 +365,7 @@ def reference_distance(np, args, pts, mesh_tris, meshio):
     except ImportError:
         return {"skipped": "scipy is not installed (needed for --reference)"}
     try:
-        ref = meshio.read(args.reference)
+        ref = meshio_read(meshio, args.reference)
     except Exception as e:  # noqa: BLE001
         fail(f"{args.reference}: cannot read the reference with meshio: {e}")
     rpts = np.asarray(ref.points, dtype=float)[:, :3]
@@ -469,7 +494,7 @@ def main():
         gmsh_report, gmsh_mesh = gmsh_check(np, args.mesh, args.no_gmsh, args.per_hex)
     meshio_error = None
     try:
-        mesh = meshio.read(args.mesh)
+        mesh = meshio_read(meshio, args.mesh)
     except Exception as e:  # noqa: BLE001
         meshio_error = f"{type(e).__name__}: {e}"
         if gmsh_mesh is None:

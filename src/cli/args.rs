@@ -205,7 +205,9 @@ pub enum Cmd {
 /// `scanflow hexmesh`.
 #[derive(Args, Debug)]
 pub struct HexmeshArgs {
-    /// Tetrahedral mesh: MEDIT .mesh, gmsh .msh (4.1 or 2.2), VTK legacy .vtk.
+    /// Tetrahedral mesh (MEDIT .mesh, gmsh .msh 4.1 or 2.2, VTK legacy .vtk), or a closed
+    /// triangle surface (PLY, OBJ) whose inside is tetrahedralised first (isosurface stuffing
+    /// of its generalised winding number).
     pub input: PathBuf,
     /// Output hexahedral mesh: .vtk, .mesh or .msh.
     #[arg(short, long)]
@@ -218,6 +220,10 @@ pub struct HexmeshArgs {
     /// diagonal).
     #[arg(long, allow_negative_numbers = true)]
     pub scale: Option<f64>,
+    /// Edge of the tetrahedra stuffed into a surface input (PLY, OBJ), in input units
+    /// (default: half the hexahedron edge).
+    #[arg(long, allow_negative_numbers = true)]
+    pub tet_size: Option<f64>,
     /// Skip the relaxation after extraction.
     #[arg(long)]
     pub no_relax: bool,

@@ -547,6 +547,11 @@ impl HexmeshConfig {
         {
             bail!("--scale {x}: the hexahedron edge must be a positive number of input units");
         }
+        if let Some(x) = a.tet_size
+            && !(x.is_finite() && x > 0.0)
+        {
+            bail!("--tet-size {x}: the tetrahedron edge must be a positive number of input units");
+        }
         if !a.input.is_file() {
             bail!("{}: no such file", a.input.display());
         }
@@ -563,6 +568,7 @@ impl HexmeshConfig {
                 output: a.output,
                 frames,
                 scale: a.scale,
+                tet_size: a.tet_size,
                 relax: !a.no_relax,
                 keep_inverted: a.keep_inverted,
             },

@@ -19,7 +19,9 @@ use crate::hex::param::{ParamParams, ParamReport, parameterise};
 use crate::hex::quality::{MeshQuality, mesh_quality};
 use crate::hex::relax::{RelaxParams, RelaxReport, relax};
 use crate::hex::smooth_frames::{SmoothParams, SmoothReport, smooth_frames};
+use crate::hex::stuffing::{StuffingParams, StuffingReport, stuff};
 use crate::hex::topology::{Topology, check_tets};
+use crate::hex::winding::WindingNumber;
 
 /// Where the frames come from (§3.2).
 #[derive(Clone, Debug, PartialEq)]
@@ -35,7 +37,8 @@ pub enum FrameChoice {
 /// One `hexmesh` run.
 #[derive(Clone, Debug)]
 pub struct HexJob {
-    /// The tetrahedral mesh (`.mesh`, `.msh`, `.vtk`).
+    /// The tetrahedral mesh (`.mesh`, `.msh`, `.vtk`), or a closed surface (`.ply`, `.obj`)
+    /// to stuff with tetrahedra first.
     pub input: PathBuf,
     /// The hexahedral mesh to write (`.vtk`, `.mesh`, `.msh`).
     pub output: PathBuf,
@@ -43,6 +46,8 @@ pub struct HexJob {
     pub frames: FrameChoice,
     /// Target hex edge in input units; `None`: a twentieth of the bounding box's diagonal.
     pub scale: Option<f64>,
+    /// Edge of the tetrahedra stuffed into a surface input; `None`: half the hex edge.
+    pub tet_size: Option<f64>,
     /// Relax the hexahedra after extraction.
     pub relax: bool,
     /// Write the mesh even when some hexahedra are inverted.
@@ -56,6 +61,8 @@ pub struct HexStats {
     pub tets: usize,
     /// Target hex edge used.
     pub scale: f64,
+    /// The stuffing of a surface input.
+    pub stuffing: Option<StuffingReport>,
     /// The smooth field's figures, when it was made.
     pub smooth: Option<SmoothReport>,
     /// The singularity graph.
@@ -74,11 +81,74 @@ pub struct HexStats {
     pub seconds: [f64; 5],
 }
 
-/// Reads `path` as a tetrahedral mesh and checks it, errors naming the file and element.
-pub fn read_tets(path: &Path) -> Result<(TetMesh, Topology)> {
-    let mesh = crate::io::volume::read(path)?.into_tet_mesh(path)?;
+/// Whether `path` names a closed surface (PLY or OBJ triangles) rather than tetrahedra.
+pub fn is_surface(path: &Path) -> bool {
+    let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("");
+    ext.eq_ignore_ascii_case("ply") || ext.eq_ignore_ascii_case("obj")
+}
+
+/// Reads a closed surface (PLY, OBJ).
+fn read_surface(path: &Path) -> Result<crate::io::mesh_read::Mesh> {
+    let obj = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("obj"));
+    let surface = if obj {
+        crate::io::obj::read_obj(path)?
+    } else {
+        crate::io::mesh_read::read_mesh(path)?
+    };
+    if surface.triangles.is_empty() {
+        return Err(Error::input(
+            path,
+            "has no triangles: expected a closed surface",
+        ));
+    }
+    Ok(surface)
+}
+
+/// The inside of `surface` (read from `path`) as tetrahedra of edge about `tet_size`: the
+/// points where its generalised winding number exceeds one half (Jacobson et al. 2013, §3),
+/// by isosurface stuffing.
+fn stuff_surface(
+    path: &Path,
+    surface: &crate::io::mesh_read::Mesh,
+    tet_size: f64,
+) -> Result<(TetMesh, StuffingReport)> {
+    let w = WindingNumber::new(&surface.vertices, &surface.triangles)
+        .map_err(|e| Error::input(path, e))?;
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    for p in &surface.vertices {
+        for r in 0..3 {
+            lo[r] = lo[r].min(p[r] - 2.0 * tet_size);
+            hi[r] = hi[r].max(p[r] + 2.0 * tet_size);
+        }
+    }
+    let f = |p: [f64; 3]| 0.5 - w.eval(p);
+    stuff(&f, lo, hi, &StuffingParams::new(tet_size))
+        .map_err(|e| Error::input(path, format!("isosurface stuffing: {e}")))
+}
+
+/// Reads `path` as a tetrahedral mesh, or stuffs the inside of a closed surface (PLY, OBJ)
+/// with tetrahedra of edge `tet_size(diagonal)`; then checks it, errors naming the file and
+/// element. Returns the hex edge `scale(diagonal)` too.
+fn read_tets(
+    path: &Path,
+    scale: Option<f64>,
+    tet_size: Option<f64>,
+) -> Result<(TetMesh, Topology, Option<StuffingReport>, f64)> {
+    let (mesh, stuffed, scale) = if is_surface(path) {
+        let surface = read_surface(path)?;
+        let scale = scale.unwrap_or_else(|| diagonal(&surface.vertices) / 20.0);
+        let (m, r) = stuff_surface(path, &surface, tet_size.unwrap_or(scale / 2.0))?;
+        (m, Some(r), scale)
+    } else {
+        let m = crate::io::volume::read(path)?.into_tet_mesh(path)?;
+        let scale = scale.unwrap_or_else(|| diagonal(&m.verts) / 20.0);
+        (m, None, scale)
+    };
     let topo = check_tets(&mesh).map_err(|e| Error::input(path, e.to_string()))?;
-    Ok((mesh, topo))
+    Ok((mesh, topo, stuffed, scale))
 }
 
 fn diagonal(verts: &[[f64; 3]]) -> f64 {
@@ -98,9 +168,8 @@ pub fn hexmesh(job: &HexJob, ctx: &Ctx) -> Result<HexStats> {
     let path = &job.input;
     let mut seconds = [0.0; 5];
     let clock = Instant::now();
-    let (mesh, topo) = read_tets(path)?;
+    let (mesh, topo, stuffing, scale) = read_tets(path, job.scale, job.tet_size)?;
     seconds[0] = clock.elapsed().as_secs_f64();
-    let scale = job.scale.unwrap_or_else(|| diagonal(&mesh.verts) / 20.0);
 
     let clock = Instant::now();
     let (field, smooth) = match &job.frames {
@@ -217,6 +286,7 @@ pub fn hexmesh(job: &HexJob, ctx: &Ctx) -> Result<HexStats> {
     Ok(HexStats {
         tets: mesh.tets.len(),
         scale,
+        stuffing,
         smooth,
         singular_by_valence: sing.by_valence(),
         singularities: sing,

@@ -195,3 +195,79 @@ fn a_field_no_hex_mesh_has_is_reported_not_passed_on() {
     );
     assert!(!out.exists());
 }
+
+#[test]
+fn a_closed_surface_is_stuffed_then_meshed_or_the_failure_named() {
+    // A 2 × 1.5 × 1 box as 12 outward triangles: stuffed with tetrahedra (winding number),
+    // then CubeCover. Stuffing bevels the corners, and snapping the planes there can flip
+    // tetrahedra: then the run must say so, name the rounding and write nothing.
+    let d = tempfile::tempdir().unwrap();
+    let ply = d.path().join("boxs.ply");
+    let v = [
+        [-1.0, -0.75, -0.5],
+        [1.0, -0.75, -0.5],
+        [1.0, 0.75, -0.5],
+        [-1.0, 0.75, -0.5],
+        [-1.0, -0.75, 0.5],
+        [1.0, -0.75, 0.5],
+        [1.0, 0.75, 0.5],
+        [-1.0, 0.75, 0.5],
+    ];
+    let f = [
+        [0, 2, 1],
+        [0, 3, 2],
+        [4, 5, 6],
+        [4, 6, 7],
+        [0, 1, 5],
+        [0, 5, 4],
+        [1, 2, 6],
+        [1, 6, 5],
+        [2, 3, 7],
+        [2, 7, 6],
+        [3, 0, 4],
+        [3, 4, 7],
+    ];
+    let mut text = String::from(
+        "ply\nformat ascii 1.0\nelement vertex 8\nproperty float x\nproperty float y\nproperty float z\nelement face 12\nproperty list uchar int vertex_indices\nend_header\n",
+    );
+    for p in v {
+        text += &format!("{} {} {}\n", p[0], p[1], p[2]);
+    }
+    for t in f {
+        text += &format!("3 {} {} {}\n", t[0], t[1], t[2]);
+    }
+    std::fs::write(&ply, text).unwrap();
+    let out = d.path().join("boxs.vtk");
+    let rep = d.path().join("boxs.json");
+    let o = run(&[
+        "hexmesh",
+        s(&ply),
+        "-o",
+        s(&out),
+        "--frames",
+        "constant",
+        "--scale",
+        "0.5",
+        "--tet-size",
+        "0.2",
+        "--report",
+        s(&rep),
+        "--progress",
+        "none",
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!err.contains("panicked"), "{err}");
+    if o.status.success() {
+        let r: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&rep).unwrap()).unwrap();
+        assert!(r["stuffing"]["tets"].as_u64().unwrap() > 0, "{r}");
+        assert_eq!(r["quality"]["inverted"].as_u64(), Some(0), "{r}");
+    } else {
+        assert_eq!(o.status.code(), Some(1), "{err}");
+        assert!(
+            err.contains("boxs.ply") && err.contains("flips") && err.contains("rounding"),
+            "{err}"
+        );
+        assert!(!out.exists());
+    }
+}

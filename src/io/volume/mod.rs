@@ -829,6 +829,91 @@ mod tests {
         hex_check_agrees("msh");
     }
 
+    #[test]
+    fn hex_check_measures_distance_to_a_reference() {
+        let d = tempfile::tempdir().unwrap();
+        // The unit cube as 2×2×2 hexahedra, against the five-tetrahedra cube (the same
+        // boundary) and against a box 0.1 taller given as an OBJ surface.
+        let mut verts = Vec::new();
+        for k in 0..3 {
+            for j in 0..3 {
+                for i in 0..3 {
+                    verts.push([i as f64 / 2.0, j as f64 / 2.0, k as f64 / 2.0]);
+                }
+            }
+        }
+        let hexes = grid_and_sheared().hexes[..8].to_vec();
+        let hp = d.path().join("half.vtk");
+        write_hex(&hp, &HexMesh { verts, hexes }, &[]).unwrap();
+        let tp = d.path().join("cube.mesh");
+        write_tet(&tp, &five_tet_cube(), &[]).unwrap();
+        let op = d.path().join("box.obj");
+        let mut obj = String::new();
+        for v in five_tet_cube().verts {
+            obj += &format!("v {} {} {}\n", v[0], v[1], v[2] * 1.1);
+        }
+        for f in [
+            [1, 3, 2],
+            [1, 4, 3],
+            [5, 6, 7],
+            [5, 7, 8],
+            [1, 2, 6],
+            [1, 6, 5],
+            [2, 3, 7],
+            [2, 7, 6],
+            [3, 4, 8],
+            [3, 8, 7],
+            [4, 1, 5],
+            [4, 5, 8],
+        ] {
+            obj += &format!("f {} {} {}\n", f[0], f[1], f[2]);
+        }
+        std::fs::write(&op, obj).unwrap();
+        let (a, b) = (
+            spawn_hex_check(
+                &hp,
+                &["--samples", "5000", "--reference", tp.to_str().unwrap()],
+            ),
+            spawn_hex_check(
+                &hp,
+                &["--samples", "5000", "--reference", op.to_str().unwrap()],
+            ),
+        );
+        let (Some(a), Some(b)) = (hex_check_json(a), hex_check_json(b)) else {
+            return;
+        };
+        eprintln!("{a}\n{b}");
+        let f = |v: &serde_json::Value| v.as_f64().unwrap_or_else(|| panic!("not a number: {v}"));
+        let r = &a["reference"];
+        assert_eq!(
+            (r["kind"].as_str(), r["triangles"].as_u64()),
+            (Some("tetmesh"), Some(12))
+        );
+        assert!(f(&r["max"]) < 1e-12, "{r}");
+        let r = &b["reference"];
+        assert_eq!(
+            (r["kind"].as_str(), r["triangles"].as_u64()),
+            (Some("surface"), Some(12))
+        );
+        for side in ["mesh_to_reference", "reference_to_mesh"] {
+            assert!((f(&r[side]["max"]) - 0.1).abs() < 1e-9, "{r}");
+        }
+        // The cube's top face (1/6 of its area) lies 0.1 below the box's top, nearer to the
+        // box's sides within 0.1 of its edges: its mean distance is
+        // ∫₀^0.1 t·4(1−2t) dt + 0.1·∫_0.1^0.5 4(1−2t) dt = 0.0813…; the rest is at 0. The
+        // box's top (area 1) is 0.1 above the cube, the strips above the cube (area 0.4) a
+        // mean 0.05, the rest (area 5) at 0.
+        let top = 4.0 * (0.005 - 0.002 / 3.0) + 0.4 * (0.25 - 0.09);
+        assert!(
+            (f(&r["mesh_to_reference"]["mean"]) - top / 6.0).abs() < 2e-3,
+            "{r}"
+        );
+        assert!(
+            (f(&r["reference_to_mesh"]["mean"]) - 0.12 / 6.4).abs() < 2e-3,
+            "{r}"
+        );
+    }
+
     /// Files of every reader: what the writers write, and the other tools' files the
     /// submodules' tests hold.
     fn fuzz_samples() -> Vec<(String, Vec<u8>)> {
