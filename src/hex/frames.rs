@@ -29,7 +29,7 @@
 //! vertex with exactly one singular edge). At a vertex where several singular edges meet (a
 //! node) the numbers of valence-3 and valence-5 edges are reported with it.
 
-use super::mesh::{FACE_OPPOSITE, Frame, HexMesh, NO_TET, TetMesh};
+use super::mesh::{Frame, HexMesh, NO_TET, TetMesh};
 use super::rotation::{Holonomy, Rot, holonomy, matching};
 use super::topology::Topology;
 
@@ -195,12 +195,6 @@ pub fn face_index(nb: &[[u32; 4]], s: usize, t: u32) -> usize {
         .iter()
         .position(|&x| x == t)
         .expect("neighbours point back")
-}
-
-/// The local face of tetrahedron `t` whose neighbour is `s`, and the face's vertices.
-pub fn shared_face(mesh: &TetMesh, topo: &Topology, t: usize, s: u32) -> (usize, [u32; 3]) {
-    let i = face_index(&topo.neighbours, t, s);
-    (i, FACE_OPPOSITE[i].map(|j| mesh.tets[t][j]))
 }
 
 /// A singular edge of the frame field.

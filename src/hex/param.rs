@@ -112,7 +112,7 @@ use faer::sparse::{SparseColMat, Triplet};
 
 use super::frames::{edge_holonomy, face_index};
 use super::mesh::{FACE_OPPOSITE, Frame, NO_TET, TetMesh};
-use super::topology::Topology;
+use super::topology::{Topology, find, union};
 
 /// Parameters of [`parameterise`].
 #[derive(Clone, Debug, PartialEq)]
@@ -541,15 +541,6 @@ fn build_cut(mesh: &TetMesh, topo: &Topology, m: &[[Rot; 4]]) -> Cut {
     }
 }
 
-fn find(parent: &mut [u32], mut x: u32) -> u32 {
-    while parent[x as usize] != x {
-        let p = parent[parent[x as usize] as usize];
-        parent[x as usize] = p;
-        x = p;
-    }
-    x
-}
-
 /// The CubeCover parameterisation of `mesh` for the frame field `frames` with matchings `m`
 /// ([`super::frames::matchings`]) and singular edges `singular` (from
 /// [`super::frames::singularities`]; they must be valid). Method: module docs.
@@ -580,11 +571,8 @@ pub fn parameterise(
             }
             for j in FACE_OPPOSITE[i] {
                 let v = mesh.tets[t][j];
-                let a = find(&mut parent, (4 * t + j) as u32);
-                let b = find(&mut parent, (4 * s as usize + local(s as usize, v)) as u32);
-                if a != b {
-                    parent[a.max(b) as usize] = a.min(b);
-                }
+                let b = (4 * s as usize + local(s as usize, v)) as u32;
+                union(&mut parent, (4 * t + j) as u32, b);
             }
         }
     }

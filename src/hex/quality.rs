@@ -435,7 +435,12 @@ pub fn hex_qualities(mesh: &HexMesh) -> Vec<HexQuality> {
 /// # Panics
 /// If a hexahedron names a vertex beyond `mesh.verts`.
 pub fn mesh_quality(mesh: &HexMesh) -> MeshQuality {
-    let per_hex = hex_qualities(mesh);
+    summarise(&hex_qualities(mesh))
+}
+
+/// [`MeshQuality`] from the qualities of every hexahedron ([`hex_qualities`]), in index
+/// order: for a caller that keeps the per-hexahedron figures too.
+pub fn summarise(per_hex: &[HexQuality]) -> MeshQuality {
     let n = per_hex.len();
     let mut q = MeshQuality {
         hexes: n,
@@ -459,7 +464,7 @@ pub fn mesh_quality(mesh: &HexMesh) -> MeshQuality {
     // each hexahedron's 12 angles in order.
     let (mut count, mut mean, mut m2) = (0.0f64, 0.0f64, 0.0f64);
     let (mut dmin, mut dmax) = (f64::INFINITY, f64::NEG_INFINITY);
-    for h in &per_hex {
+    for h in per_hex {
         let sj = h.min_scaled_jacobian;
         let bin = if sj > 0.0 {
             1 + SJ_BIN_LOWER.iter().filter(|&&lo| sj >= lo).count()

@@ -374,7 +374,8 @@ fn same_cycle(a: [u32; 3], b: [u32; 3]) -> bool {
     b == a || b == [a[1], a[2], a[0]] || b == [a[2], a[0], a[1]]
 }
 
-fn find(parent: &mut [u32], mut x: u32) -> u32 {
+/// Union-find: the root of `x`, halving the path.
+pub(crate) fn find(parent: &mut [u32], mut x: u32) -> u32 {
     while parent[x as usize] != x {
         let p = parent[parent[x as usize] as usize];
         parent[x as usize] = p;
@@ -383,7 +384,8 @@ fn find(parent: &mut [u32], mut x: u32) -> u32 {
     x
 }
 
-fn union(parent: &mut [u32], a: u32, b: u32) {
+/// Union-find: joins the sets of `a` and `b` under the lower root.
+pub(crate) fn union(parent: &mut [u32], a: u32, b: u32) {
     let (ra, rb) = (find(parent, a), find(parent, b));
     if ra != rb {
         let (lo, hi) = (ra.min(rb), ra.max(rb));

@@ -16,12 +16,13 @@ use crate::hex::extract::{ExtractReport, extract};
 use crate::hex::frames::{self, Singularities};
 use crate::hex::mesh::{HexMesh, TetMesh};
 use crate::hex::param::{ParamParams, ParamReport, parameterise};
-use crate::hex::quality::{MeshQuality, mesh_quality};
+use crate::hex::quality::{MeshQuality, hex_qualities, summarise};
 use crate::hex::relax::{RelaxParams, RelaxReport, relax};
 use crate::hex::smooth_frames::{SmoothParams, SmoothReport, smooth_frames};
 use crate::hex::stuffing::{StuffingParams, StuffingReport, stuff};
 use crate::hex::topology::{Topology, check_tets};
 use crate::hex::winding::WindingNumber;
+use crate::types::Aabb;
 
 /// Where the frames come from (§3.2).
 #[derive(Clone, Debug, PartialEq)]
@@ -116,16 +117,9 @@ fn stuff_surface(
 ) -> Result<(TetMesh, StuffingReport)> {
     let w = WindingNumber::new(&surface.vertices, &surface.triangles)
         .map_err(|e| Error::input(path, e))?;
-    let mut lo = [f64::INFINITY; 3];
-    let mut hi = [f64::NEG_INFINITY; 3];
-    for p in &surface.vertices {
-        for r in 0..3 {
-            lo[r] = lo[r].min(p[r] - 2.0 * tet_size);
-            hi[r] = hi[r].max(p[r] + 2.0 * tet_size);
-        }
-    }
+    let b = bounds(&surface.vertices).grown(2.0 * tet_size);
     let f = |p: [f64; 3]| 0.5 - w.eval(p);
-    stuff(&f, lo, hi, &StuffingParams::new(tet_size))
+    stuff(&f, b.min, b.max, &StuffingParams::new(tet_size))
         .map_err(|e| Error::input(path, format!("isosurface stuffing: {e}")))
 }
 
@@ -139,28 +133,24 @@ fn read_tets(
 ) -> Result<(TetMesh, Topology, Option<StuffingReport>, f64)> {
     let (mesh, stuffed, scale) = if is_surface(path) {
         let surface = read_surface(path)?;
-        let scale = scale.unwrap_or_else(|| diagonal(&surface.vertices) / 20.0);
+        let scale = scale.unwrap_or_else(|| bounds(&surface.vertices).diagonal() / 20.0);
         let (m, r) = stuff_surface(path, &surface, tet_size.unwrap_or(scale / 2.0))?;
         (m, Some(r), scale)
     } else {
         let m = crate::io::volume::read(path)?.into_tet_mesh(path)?;
-        let scale = scale.unwrap_or_else(|| diagonal(&m.verts) / 20.0);
+        let scale = scale.unwrap_or_else(|| bounds(&m.verts).diagonal() / 20.0);
         (m, None, scale)
     };
     let topo = check_tets(&mesh).map_err(|e| Error::input(path, e.to_string()))?;
     Ok((mesh, topo, stuffed, scale))
 }
 
-fn diagonal(verts: &[[f64; 3]]) -> f64 {
-    let mut lo = [f64::INFINITY; 3];
-    let mut hi = [f64::NEG_INFINITY; 3];
-    for p in verts {
-        for r in 0..3 {
-            lo[r] = lo[r].min(p[r]);
-            hi[r] = hi[r].max(p[r]);
-        }
+fn bounds(verts: &[[f64; 3]]) -> Aabb {
+    let mut b = Aabb::EMPTY;
+    for &p in verts {
+        b.add(p);
     }
-    (0..3).map(|r| (hi[r] - lo[r]).powi(2)).sum::<f64>().sqrt()
+    b
 }
 
 /// Runs `job` (module docs).
@@ -260,7 +250,8 @@ pub fn hexmesh(job: &HexJob, ctx: &Ctx) -> Result<HexStats> {
     });
     seconds[4] = clock.elapsed().as_secs_f64();
 
-    let quality = ctx.pool.install(|| mesh_quality(&hexes));
+    let per_hex = ctx.pool.install(|| hex_qualities(&hexes));
+    let quality = summarise(&per_hex);
     if quality.inverted > 0 && !job.keep_inverted {
         let worst: Vec<String> = quality
             .worst_hexes
@@ -278,10 +269,7 @@ pub fn hexmesh(job: &HexJob, ctx: &Ctx) -> Result<HexStats> {
             ),
         ));
     }
-    let sj: Vec<f64> = crate::hex::quality::hex_qualities(&hexes)
-        .iter()
-        .map(|q| q.min_scaled_jacobian)
-        .collect();
+    let sj: Vec<f64> = per_hex.iter().map(|q| q.min_scaled_jacobian).collect();
     crate::io::volume::write_hex(&job.output, &hexes, &[("scaled_jacobian", &sj)])?;
     Ok(HexStats {
         tets: mesh.tets.len(),

@@ -173,6 +173,8 @@ fn bad_tetrahedra_and_options_are_named() {
     // Options checked before any work.
     let e = usage(&["hexmesh", s(&missing), "-o", s(&out), "--scale", "-1"]);
     assert!(e.contains("--scale"), "{e}");
+    let e = usage(&["hexmesh", s(&missing), "-o", s(&out), "--tet-size", "0"]);
+    assert!(e.contains("--tet-size"), "{e}");
     let e = usage(&["hexmesh", s(&missing), "-o", s(&out), "--frames", "wavy"]);
     assert!(e.contains("--frames"), "{e}");
     let e = usage(&["hexmesh", s(&missing), "-o", s(&d.path().join("o.ply"))]);
