@@ -212,9 +212,11 @@ pub struct HexmeshArgs {
     /// Output hexahedral mesh: .vtk, .mesh or .msh.
     #[arg(short, long)]
     pub output: PathBuf,
-    /// Frame field: constant (the coordinate axes: a polycube map), smooth (boundary-aligned
-    /// smooth frames), or meta:FILE (the frames of a coarse hexahedral meta-mesh in FILE).
-    #[arg(long, default_value = "smooth")]
+    /// Frame field: polycube (the rotations of a deformation that turns the boundary onto
+    /// axis planes: no interior singularity), smooth (boundary-aligned smooth frames, with
+    /// singular curves), constant (the coordinate axes), or meta:FILE (the frames of a coarse
+    /// hexahedral meta-mesh in FILE).
+    #[arg(long, default_value = "polycube")]
     pub frames: String,
     /// Target hexahedron edge, in input units (default: a twentieth of the bounding box's
     /// diagonal).
@@ -224,6 +226,13 @@ pub struct HexmeshArgs {
     /// (default: half the hexahedron edge).
     #[arg(long, allow_negative_numbers = true)]
     pub tet_size: Option<f64>,
+    /// Add a layer of hexahedra along the boundary before relaxing (the default with
+    /// --frames polycube, whose corners would otherwise be flat hexahedra).
+    #[arg(long, conflicts_with = "no_pillow")]
+    pub pillow: bool,
+    /// No boundary layer, even with --frames polycube.
+    #[arg(long)]
+    pub no_pillow: bool,
     /// Skip the relaxation after extraction.
     #[arg(long)]
     pub no_relax: bool,

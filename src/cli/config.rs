@@ -529,6 +529,7 @@ impl HexmeshConfig {
         let frames = match a.frames.as_str() {
             "constant" => FrameChoice::Constant,
             "smooth" => FrameChoice::Smooth,
+            "polycube" => FrameChoice::Polycube,
             s => match s.strip_prefix("meta:") {
                 Some(f) if !f.is_empty() => {
                     let f = PathBuf::from(f);
@@ -538,7 +539,7 @@ impl HexmeshConfig {
                     FrameChoice::Meta(f)
                 }
                 _ => bail!(
-                    "--frames {s}: expected constant, smooth or meta:FILE (a hexahedral meta-mesh)"
+                    "--frames {s}: expected polycube, smooth, constant or meta:FILE (a hexahedral meta-mesh)"
                 ),
             },
         };
@@ -569,6 +570,11 @@ impl HexmeshConfig {
                 frames,
                 scale: a.scale,
                 tet_size: a.tet_size,
+                pillow: match (a.pillow, a.no_pillow) {
+                    (true, _) => Some(true),
+                    (_, true) => Some(false),
+                    _ => None,
+                },
                 relax: !a.no_relax,
                 keep_inverted: a.keep_inverted,
             },

@@ -103,6 +103,80 @@ impl TetMesh {
     }
 }
 
+impl HexMesh {
+    /// The boundary quadrilaterals (faces of exactly one hexahedron) as (hexahedron, local
+    /// face of [`super::quality::HEX_FACES`], outward), sorted.
+    pub fn boundary_quads(&self) -> Vec<(u32, u8)> {
+        use super::quality::HEX_FACES;
+        let mut faces: Vec<([u32; 4], u32, u8)> = Vec::with_capacity(6 * self.hexes.len());
+        for (h, hex) in self.hexes.iter().enumerate() {
+            for (f, face) in HEX_FACES.iter().enumerate() {
+                let mut key = face.map(|i| hex[i]);
+                key.sort_unstable();
+                faces.push((key, h as u32, f as u8));
+            }
+        }
+        faces.sort_unstable();
+        let mut out = Vec::new();
+        for run in faces.chunk_by(|a, b| a.0 == b.0) {
+            if let [(_, h, f)] = run {
+                out.push((*h, *f));
+            }
+        }
+        out.sort_unstable();
+        out
+    }
+}
+
+impl TetMesh {
+    /// Splits each of `edges` at its midpoint: every tetrahedron around the edge becomes two
+    /// (the edge's ends replaced by the midpoint in turn, which keeps the orientation), so the
+    /// mesh stays conforming. Edges are split one after another; an edge no tetrahedron has
+    /// any more (it cannot happen for distinct edges of a conforming mesh) is skipped. Returns
+    /// the number of new vertices.
+    pub fn split_edges(&mut self, edges: &[[u32; 2]]) -> usize {
+        let mut at: Vec<Vec<u32>> = vec![Vec::new(); self.verts.len()];
+        for (t, tet) in self.tets.iter().enumerate() {
+            for &v in tet {
+                at[v as usize].push(t as u32);
+            }
+        }
+        let mut added = 0;
+        for &[a, b] in edges {
+            let around: Vec<u32> = at[a as usize]
+                .iter()
+                .copied()
+                .filter(|&t| self.tets[t as usize].contains(&b))
+                .collect();
+            if around.is_empty() {
+                continue;
+            }
+            let (pa, pb) = (self.verts[a as usize], self.verts[b as usize]);
+            let m = self.verts.len() as u32;
+            self.verts.push([0, 1, 2].map(|k| 0.5 * (pa[k] + pb[k])));
+            at.push(Vec::new());
+            added += 1;
+            for t in around {
+                let tet = self.tets[t as usize];
+                let lower = tet.map(|v| if v == b { m } else { v });
+                let upper = tet.map(|v| if v == a { m } else { v });
+                let u = self.tets.len() as u32;
+                self.tets[t as usize] = lower;
+                self.tets.push(upper);
+                at[b as usize].retain(|&x| x != t);
+                at[b as usize].push(u);
+                at[m as usize].extend([t, u]);
+                for v in tet {
+                    if v != a && v != b {
+                        at[v as usize].push(u);
+                    }
+                }
+            }
+        }
+        added
+    }
+}
+
 /// No neighbour (a boundary face) in [`tet_neighbours`].
 pub const NO_TET: u32 = u32::MAX;
 
@@ -195,5 +269,23 @@ mod tests {
         let nb = tet_neighbours(&m).unwrap();
         assert_eq!(nb[0], [1, NO_TET, NO_TET, NO_TET]);
         assert_eq!(nb[1], [0, NO_TET, NO_TET, NO_TET]);
+    }
+
+    #[test]
+    fn splitting_edges_keeps_volume_orientation_and_conformity() {
+        let mut m = TetMesh::grid_box([2, 2, 2], 1.0);
+        let total: f64 = (0..m.tets.len()).map(|t| m.volume(t)).sum();
+        let n = m.tets.len();
+        // The main diagonal of the first cube (in all six of its tetrahedra), then an edge
+        // made by that split.
+        let d = [0, 13];
+        let mid = m.verts.len() as u32;
+        assert_eq!(m.split_edges(&[d, [0, mid]]), 2);
+        assert_eq!(m.tets.len(), n + 12);
+        let after: f64 = (0..m.tets.len()).map(|t| m.volume(t)).sum();
+        assert!((after - total).abs() < 1e-12);
+        assert!((0..m.tets.len()).all(|t| m.volume(t) > 0.0));
+        assert!(m.tets.iter().all(|t| !(t.contains(&0) && t.contains(&13))));
+        assert!(crate::hex::topology::check_tets(&m).is_ok());
     }
 }

@@ -13,17 +13,21 @@
 //! * [`frames`]: constant and meta-mesh frames, matchings, singular edges and invalid
 //!   configurations (§2.2, §3.2).
 //! * [`smooth_frames`]: boundary-aligned smooth frames (L4 spherical harmonics).
+//! * [`polycube`]: frames without interior singularities from a polycube deformation.
 //! * [`param`]: the integer-grid parameterisation with greedy rounding (§3.1).
 //! * [`quality`]: Verdict's element measures.
 //! * [`stuffing`], [`winding`]: tetrahedra of a closed surface's inside (isosurface stuffing
 //!   with the generalised winding number).
 //! * [`extract`]: hexahedra from an integer-grid map by walks from cube centres to corners.
+//! * [`pillow`]: a layer of hexahedra along the boundary (for polycube corners).
 //! * [`relax`]: relaxation of the extracted mesh towards ideal cubes, boundary on the surface.
 
 pub mod extract;
 pub mod frames;
 pub mod mesh;
 pub mod param;
+pub mod pillow;
+pub mod polycube;
 pub mod quality;
 pub mod relax;
 pub mod rotation;

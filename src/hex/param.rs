@@ -26,11 +26,18 @@
 //! # Constraints
 //!
 //! * each cut face: `x_s(v) − Π x_t(v) − g = 0` for its three vertices, `g ∈ ℤ³`;
-//! * boundary alignment: on a boundary face the coordinate of the axis nearest its normal is
-//!   one integer `b` at its three vertices (the face lies in an integer plane);
+//! * boundary alignment: on a boundary face the coordinate of the axis nearest its normal
+//!   (or the axis the caller gives, [`Field::axes`]) is one integer `b` at its three vertices
+//!   (the face lies in an integer plane);
 //! * singular edges: the two coordinates across the edge's axis are integers `c₁, c₂` at
 //!   both its vertices (the edge lies on an integer line);
-//! * the first corner of tetrahedron 0 at the origin (translation).
+//! * translation: per axis, one vertex of the first boundary face aligned with that axis has
+//!   that coordinate 0 (the first corner of tetrahedron 0 for an axis no face has). Anchoring
+//!   on a boundary plane matters: an anchor inside the solid a fraction of a cell from a
+//!   boundary plane is pinched flat against it when that plane is rounded.
+//!
+//! The energy is `Σ_t vol_t |∇x_t − T_t/s|²`, `T_t` the frame (or the target gradients the
+//! caller gives, [`Field::targets`]) and `s` the hex edge.
 //!
 //! They are eliminated exactly (Gaussian elimination that keeps every eliminated unknown as
 //! an expression in free ones, pivoting on continuous unknowns with unit coefficients first;
@@ -552,6 +559,45 @@ pub fn parameterise(
     singular: &[super::frames::SingularEdge],
     params: &ParamParams,
 ) -> Result<(GridMap, ParamReport), ParamError> {
+    let field = Field {
+        frames,
+        targets: frames,
+        axes: None,
+        matchings: m,
+        singular,
+    };
+    parameterise_with(mesh, topo, &field, params)
+}
+
+/// What [`parameterise_with`] fits: the frames and what may replace their defaults.
+#[derive(Clone, Copy, Debug)]
+pub struct Field<'a> {
+    /// One frame per tetrahedron.
+    pub frames: &'a [Frame],
+    /// Per tetrahedron, the gradients `∇u`, `∇v`, `∇w` (rows, times the scale) the map is
+    /// drawn towards; [`parameterise`] uses the frames.
+    pub targets: &'a [Frame],
+    /// Per boundary face (in [`Topology::boundary`]'s order), the parameter axis (0, 1, 2;
+    /// in the tetrahedron's frame) it is aligned with; `None`: the frame axis nearest its
+    /// normal.
+    pub axes: Option<&'a [u8]>,
+    /// The matchings ([`super::frames::matchings`]).
+    pub matchings: &'a [[Rot; 4]],
+    /// The singular edges, all valid ([`super::frames::singularities`]).
+    pub singular: &'a [super::frames::SingularEdge],
+}
+
+/// As [`parameterise`], with targets and boundary axes that may differ from the frames'. A
+/// polycube deformation ([`super::polycube`]) gives both: its gradients are a map whose
+/// boundary is nearly axis-aligned with no tetrahedron inverted, and its cleaned-up labels
+/// say which plane each boundary face goes to.
+pub fn parameterise_with(
+    mesh: &TetMesh,
+    topo: &Topology,
+    field: &Field<'_>,
+    params: &ParamParams,
+) -> Result<(GridMap, ParamReport), ParamError> {
+    let (frames, m, singular) = (field.frames, field.matchings, field.singular);
     if !(params.scale.is_finite() && params.scale > 0.0) {
         return Err(ParamError::Scale(params.scale));
     }
@@ -594,9 +640,45 @@ pub fn parameterise(
     let mut names: Vec<IntegerVar> = Vec::new();
     let base = 3 * ncv;
     let mut rows: Vec<(Vec<(u32, f64)>, f64)> = Vec::new();
-    // Translation: the first corner at the origin.
+    // The aligned axis of each boundary face's plane: the given one, or the one nearest its
+    // normal.
+    let face_axis: Vec<usize> = topo
+        .boundary
+        .iter()
+        .enumerate()
+        .map(|(face, &(t, i))| {
+            let (t, i) = (t as usize, i as usize);
+            match field.axes {
+                Some(axes) => {
+                    let rm = cut.chart[t].matrix();
+                    (0..3)
+                        .find(|&a| rm[a][axes[face] as usize] != 0)
+                        .expect("a rotation maps an axis to an axis")
+                }
+                None => {
+                    let f = FACE_OPPOSITE[i].map(|j| mesh.verts[mesh.tets[t][j] as usize]);
+                    let n = cross(sub(f[1], f[0]), sub(f[2], f[0]));
+                    let fr = aligned_frame(&frames[t], cut.chart[t]);
+                    (0..3)
+                        .max_by(|&a, &b| dot(fr[a], n).abs().total_cmp(&dot(fr[b], n).abs()))
+                        .expect("three axes")
+                }
+            }
+        })
+        .collect();
+    // Translation: per axis, a vertex of the first boundary face on a plane of that axis at
+    // 0 (so the grid is anchored on a boundary plane, and rounding the other planes cannot
+    // pinch the solid against an anchor inside it); the first corner when no face has it.
     for r in 0..3 {
-        rows.push((vec![(xvar(0, 0, r), 1.0)], 0.0));
+        let anchor = topo
+            .boundary
+            .iter()
+            .zip(&face_axis)
+            .find(|&(_, &k)| k == r)
+            .map_or((0, 0), |(&(t, i), _)| {
+                (t as usize, FACE_OPPOSITE[i as usize][0])
+            });
+        rows.push((vec![(xvar(anchor.0, anchor.1, r), 1.0)], 0.0));
     }
     for t in 0..nt {
         for i in 0..4 {
@@ -629,15 +711,9 @@ pub fn parameterise(
             }
         }
     }
-    // Boundary faces on integer planes of the aligned axis nearest their normal.
-    for &(t, i) in &topo.boundary {
-        let (t, i) = (t as usize, i as usize);
-        let f = FACE_OPPOSITE[i].map(|j| mesh.verts[mesh.tets[t][j] as usize]);
-        let n = cross(sub(f[1], f[0]), sub(f[2], f[0]));
-        let fr = aligned_frame(&frames[t], cut.chart[t]);
-        let k = (0..3)
-            .max_by(|&a, &b| dot(fr[a], n).abs().total_cmp(&dot(fr[b], n).abs()))
-            .expect("three axes");
+    // Boundary faces on integer planes of their axis.
+    for (face, &(t, i)) in topo.boundary.iter().enumerate() {
+        let (t, i, k) = (t as usize, i as usize, face_axis[face]);
         let b = base + names.len() as u32;
         names.push(IntegerVar::Plane {
             tet: t as u32,
@@ -681,7 +757,9 @@ pub fn parameterise(
     // Local energies.
     let grads: Vec<[[f64; 3]; 4]> = (0..nt).map(|t| gradients(&mesh.corners(t))).collect();
     let targets: Vec<Frame> = (0..nt)
-        .map(|t| aligned_frame(&frames[t], cut.chart[t]).map(|a| a.map(|x| x / params.scale)))
+        .map(|t| {
+            aligned_frame(&field.targets[t], cut.chart[t]).map(|a| a.map(|x| x / params.scale))
+        })
         .collect();
     let volumes: Vec<f64> = (0..nt).map(|t| mesh.volume(t)).collect();
     let total_volume: f64 = volumes.iter().sum();

@@ -500,33 +500,15 @@ pub fn relax(
     }
 
     // Boundary quadrilaterals: faces of exactly one hexahedron.
-    let mut faces: Vec<([u32; 4], u32, u8)> = Vec::with_capacity(6 * nh);
-    for (k, h) in hex.hexes.iter().enumerate() {
-        for (f, q) in HEX_FACES.iter().enumerate() {
-            let mut key = q.map(|i| h[i]);
-            key.sort_unstable();
-            faces.push((key, k as u32, f as u8));
-        }
-    }
-    faces.sort_unstable();
     let mut normals: Vec<Vec<[f64; 3]>> = vec![Vec::new(); nv];
-    let mut s = 0;
-    while s < faces.len() {
-        let mut e = s + 1;
-        while e < faces.len() && faces[e].0 == faces[s].0 {
-            e += 1;
+    for (k, f) in hex.boundary_quads() {
+        let q = HEX_FACES[f as usize].map(|i| hex.verts[hex.hexes[k as usize][i] as usize]);
+        let n = cross(sub(q[2], q[0]), sub(q[3], q[1]));
+        let len = dot(n, n).sqrt();
+        let n = if len > 0.0 { scale(n, 1.0 / len) } else { n };
+        for i in HEX_FACES[f as usize] {
+            normals[hex.hexes[k as usize][i] as usize].push(n);
         }
-        if e - s == 1 {
-            let (_, k, f) = faces[s];
-            let q = HEX_FACES[f as usize].map(|i| hex.verts[hex.hexes[k as usize][i] as usize]);
-            let n = cross(sub(q[2], q[0]), sub(q[3], q[1]));
-            let len = dot(n, n).sqrt();
-            let n = if len > 0.0 { scale(n, 1.0 / len) } else { n };
-            for i in HEX_FACES[f as usize] {
-                normals[hex.hexes[k as usize][i] as usize].push(n);
-            }
-        }
-        s = e;
     }
     let bvh = Bvh::new(boundary_verts, boundary_tris);
     let cos_feature = params.feature_angle_deg.to_radians().cos();

@@ -323,6 +323,21 @@ impl Topology {
         self.boundary_surfaces.iter().map(|s| s.genus).sum()
     }
 
+    /// The interior edges whose two ends lie on the boundary (chords through the solid). A
+    /// map that flattens boundary charts onto planes flattens a tetrahedron whose vertices
+    /// are all on one chart; splitting the chords ([`TetMesh::split_edges`]) leaves every
+    /// tetrahedron an interior vertex or a boundary edge.
+    pub fn boundary_chords(&self) -> Vec<[u32; 2]> {
+        self.edges
+            .iter()
+            .zip(&self.edge_on_boundary)
+            .filter(|&(&[a, b], &on)| {
+                !on && self.vertex_on_boundary[a as usize] && self.vertex_on_boundary[b as usize]
+            })
+            .map(|(&e, _)| e)
+            .collect()
+    }
+
     /// Number of vertices on the boundary.
     pub fn num_boundary_vertices(&self) -> usize {
         self.vertex_on_boundary.iter().filter(|&&b| b).count()

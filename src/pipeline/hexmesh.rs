@@ -15,9 +15,12 @@ use crate::exec::Ctx;
 use crate::hex::extract::{ExtractReport, extract};
 use crate::hex::frames::{self, Singularities};
 use crate::hex::mesh::{HexMesh, TetMesh};
-use crate::hex::param::{ParamParams, ParamReport, parameterise};
+use crate::hex::param::{Field, ParamParams, ParamReport, parameterise_with};
+use crate::hex::pillow::{PillowReport, pillow};
+use crate::hex::polycube::{PolycubeParams, PolycubeReport, polycube_frames};
 use crate::hex::quality::{MeshQuality, hex_qualities, summarise};
 use crate::hex::relax::{RelaxParams, RelaxReport, relax};
+use crate::hex::rotation::Rot;
 use crate::hex::smooth_frames::{SmoothParams, SmoothReport, smooth_frames};
 use crate::hex::stuffing::{StuffingParams, StuffingReport, stuff};
 use crate::hex::topology::{Topology, check_tets};
@@ -33,6 +36,9 @@ pub enum FrameChoice {
     Smooth,
     /// The frames of a coarse hexahedral meta-mesh in this file.
     Meta(PathBuf),
+    /// The rotations of a polycube deformation: no interior singularity, the boundary on
+    /// axis planes ([`crate::hex::polycube`]).
+    Polycube,
 }
 
 /// One `hexmesh` run.
@@ -49,6 +55,9 @@ pub struct HexJob {
     pub scale: Option<f64>,
     /// Edge of the tetrahedra stuffed into a surface input; `None`: half the hex edge.
     pub tet_size: Option<f64>,
+    /// Add a layer of hexahedra along the boundary before relaxing ([`crate::hex::pillow`]);
+    /// `None`: with polycube frames only.
+    pub pillow: Option<bool>,
     /// Relax the hexahedra after extraction.
     pub relax: bool,
     /// Write the mesh even when some hexahedra are inverted.
@@ -66,6 +75,13 @@ pub struct HexStats {
     pub stuffing: Option<StuffingReport>,
     /// The smooth field's figures, when it was made.
     pub smooth: Option<SmoothReport>,
+    /// The polycube deformation's figures, when it was made.
+    pub polycube: Option<PolycubeReport>,
+    /// Interior edges between boundary vertices split before the polycube map (new vertices).
+    pub chords_split: usize,
+    /// What the map's gradients were drawn towards: `frames`, or `deformation` (the polycube
+    /// deformation's gradients, tried when the frames' map flipped tetrahedra).
+    pub targets: &'static str,
     /// The singularity graph.
     pub singularities: Singularities,
     /// Singular edges of valence 3, 5 and 6.
@@ -74,6 +90,8 @@ pub struct HexStats {
     pub param: ParamReport,
     /// The extraction.
     pub extract: ExtractReport,
+    /// The pillowing, when it ran.
+    pub pillow: Option<PillowReport>,
     /// The relaxation, when it ran.
     pub relax: Option<RelaxReport>,
     /// The written mesh's quality.
@@ -158,52 +176,85 @@ pub fn hexmesh(job: &HexJob, ctx: &Ctx) -> Result<HexStats> {
     let path = &job.input;
     let mut seconds = [0.0; 5];
     let clock = Instant::now();
-    let (mesh, topo, stuffing, scale) = read_tets(path, job.scale, job.tet_size)?;
+    let (mut mesh, mut topo, stuffing, scale) = read_tets(path, job.scale, job.tet_size)?;
+    let mut chords_split = 0;
+    if job.frames == FrameChoice::Polycube {
+        // A tetrahedron with all four vertices on one chart would be flattened onto its plane.
+        chords_split = mesh.split_edges(&topo.boundary_chords());
+        if chords_split > 0 {
+            topo = check_tets(&mesh).map_err(|e| Error::input(path, e.to_string()))?;
+        }
+    }
     seconds[0] = clock.elapsed().as_secs_f64();
 
     let clock = Instant::now();
-    let (field, smooth) = match &job.frames {
-        FrameChoice::Constant => (frames::constant_frames(mesh.tets.len()), None),
+    let polycube_run = job.frames == FrameChoice::Polycube;
+    let (field, smooth, polycube) = match &job.frames {
+        FrameChoice::Constant => (frames::constant_frames(mesh.tets.len()), None, None),
         FrameChoice::Smooth => {
             let (f, r) = ctx
                 .pool
                 .install(|| smooth_frames(&mesh, &topo.neighbours, &SmoothParams::default()))
                 .map_err(|e| Error::input(path, format!("smooth frames: {e}")))?;
-            (f, Some(r))
+            (f, Some(r), None)
         }
         FrameChoice::Meta(meta) => {
             let hexes: HexMesh = crate::io::volume::read(meta)?.into_hex_mesh(meta)?;
             let f = frames::meta_frames(&mesh, &hexes)
                 .map_err(|e| Error::input(meta, e.to_string()))?;
-            (f, None)
+            (f, None, None)
+        }
+        FrameChoice::Polycube => {
+            let p = polycube_frames(&mesh, &topo, &PolycubeParams::default())
+                .map_err(|e| Error::input(path, e.to_string()))?;
+            (p.frames.clone(), None, Some(p))
         }
     };
-    let m = frames::matchings(&field, &topo);
+    // A polycube field is one rotation per tetrahedron of a single deformation: its
+    // matchings are the identity by construction (the closest cube rotation would misread
+    // the quarter turns the field makes across the polycube's edges).
+    let m = if polycube.is_some() {
+        vec![[Rot::ID; 4]; mesh.tets.len()]
+    } else {
+        frames::matchings(&field, &topo)
+    };
     let sing = frames::singularities(&mesh, &topo, &field, &m);
     seconds[1] = clock.elapsed().as_secs_f64();
     if let Some(first) = sing.invalid.first() {
         return Err(Error::input(
             path,
             format!(
-                "the frame field has {} configuration(s) no hexahedral mesh has; the first: {first}; try --frames constant or a meta-mesh (--frames meta:FILE)",
+                "the frame field has {} configuration(s) no hexahedral mesh has; the first: {first}; try --frames polycube, constant or a meta-mesh (--frames meta:FILE)",
                 sing.invalid.len()
             ),
         ));
     }
 
     let clock = Instant::now();
-    let (map, param) = parameterise(
-        &mesh,
-        &topo,
-        &field,
-        &m,
-        &sing.edges,
-        &ParamParams {
-            scale,
-            ..ParamParams::default()
-        },
-    )
-    .map_err(|e| Error::input(path, e.to_string()))?;
+    let params = ParamParams {
+        scale,
+        ..ParamParams::default()
+    };
+    let mut input = Field {
+        frames: &field,
+        targets: &field,
+        axes: polycube.as_ref().map(|p| p.axes.as_slice()),
+        matchings: &m,
+        singular: &sing.edges,
+    };
+    let mut targets = "frames";
+    let (mut map, mut param) = parameterise_with(&mesh, &topo, &input, &params)
+        .map_err(|e| Error::input(path, e.to_string()))?;
+    if param.flipped_final > 0
+        && let Some(p) = &polycube
+    {
+        input.targets = &p.gradients;
+        let (map2, param2) = parameterise_with(&mesh, &topo, &input, &params)
+            .map_err(|e| Error::input(path, e.to_string()))?;
+        if param2.flipped_final < param.flipped_final {
+            (map, param, targets) = (map2, param2, "deformation");
+        }
+    }
     seconds[2] = clock.elapsed().as_secs_f64();
     if param.flipped_final > 0 {
         let cause = match &param.first_flip {
@@ -243,10 +294,21 @@ pub fn hexmesh(job: &HexJob, ctx: &Ctx) -> Result<HexStats> {
     }
 
     let clock = Instant::now();
+    let pillowed = job
+        .pillow
+        .unwrap_or(job.frames == FrameChoice::Polycube)
+        .then(|| pillow(&mut hexes));
     let relaxed = job.relax.then(|| {
         let tris = topo.boundary_triangles(&mesh);
+        // A polycube map's corners and edges lie where the solid is smooth: the boundary
+        // quadrilaterals bend there without a feature of the solid, so only a much sharper
+        // bend holds a vertex.
+        let params = RelaxParams {
+            feature_angle_deg: if polycube_run { 100.0 } else { 30.0 },
+            ..RelaxParams::default()
+        };
         ctx.pool
-            .install(|| relax(&mut hexes, &mesh.verts, &tris, &RelaxParams::default()))
+            .install(|| relax(&mut hexes, &mesh.verts, &tris, &params))
     });
     seconds[4] = clock.elapsed().as_secs_f64();
 
@@ -276,10 +338,14 @@ pub fn hexmesh(job: &HexJob, ctx: &Ctx) -> Result<HexStats> {
         scale,
         stuffing,
         smooth,
+        polycube: polycube.map(|p| p.report),
+        chords_split,
+        targets,
         singular_by_valence: sing.by_valence(),
         singularities: sing,
         param,
         extract: ext,
+        pillow: pillowed,
         relax: relaxed,
         quality,
         seconds,

@@ -175,6 +175,29 @@ pub fn cholesky(a: &mut Triplets, rhs: &[[f64; 3]]) -> Result<Vec<[f64; 3]>, Str
     Ok(columns(&x, n))
 }
 
+/// A sparse Cholesky factor of a symmetric positive definite matrix, kept to solve for
+/// several right-hand sides over time (one factorisation, many solves).
+pub struct CholeskyFactor {
+    n: usize,
+    llt: faer::sparse::linalg::solvers::Llt<usize, f64>,
+}
+
+impl CholeskyFactor {
+    /// Factors `A` given by its lower triangle.
+    pub fn new(a: &mut Triplets) -> Result<CholeskyFactor, String> {
+        let m = a.matrix()?;
+        let llt = m
+            .sp_cholesky(Side::Lower)
+            .map_err(|e| format!("sparse Cholesky failed: {e:?}"))?;
+        Ok(CholeskyFactor { n: a.n, llt })
+    }
+
+    /// `A⁻¹ rhs`.
+    pub fn solve(&self, rhs: &[[f64; 3]]) -> Vec<[f64; 3]> {
+        columns(&self.llt.solve(rhs_mat(rhs, self.n)), self.n)
+    }
+}
+
 /// Solves `A x = rhs` for a general square `A` given by all its entries (sparse LU).
 pub fn lu(a: &mut Triplets, rhs: &[[f64; 3]]) -> Result<Vec<[f64; 3]>, String> {
     let n = a.n;

@@ -1,0 +1,635 @@
+//! Polycube frames: a frame field with no interior singularity, read off a deformation of the
+//! solid that turns every boundary normal towards a coordinate axis (Gregson, Sheffer, Zhang,
+//! "All-hex mesh generation via volumetric polycube deformation", SGP 2011, §4).
+//!
+//! # The deformation (§4.1–4.2, rotation-driven)
+//!
+//! Starting from the input positions `y = x`, repeat:
+//!
+//! 1. **Targets.** Each boundary triangle `f` takes the signed coordinate axis `a_f` nearest its
+//!    current normal `n_f` (its label); its target rotation is the shortest turn from `n_f` to
+//!    `a_f`, as a rotation vector `ρ_f = θ (n_f × a_f)/|n_f × a_f|`, `cos θ = n_f · a_f`
+//!    (`θ ≤ 54.7°`, since the nearest axis is never farther).
+//! 2. **Spread.** A rotation vector `r_t` per tetrahedron minimises
+//!    `Σ_{faces st} |r_s − r_t|² + λ Σ_f (A_f / Ā) |r_{t(f)} − ρ_f|²`: the graph Laplacian of
+//!    the tetrahedra across faces plus the boundary targets (`A_f` the triangle's input area, `Ā`
+//!    their mean). The matrix does not change between iterations: it is factored once (sparse
+//!    Cholesky) and each iteration is three back-substitutions.
+//! 3. **Deform.** New positions minimise `Σ_t V_t |∇y|_t − exp(r_t) C(∇y_old|_t)|²` with
+//!    linear elements on the input mesh (`V_t` its volumes): every tetrahedron is asked to
+//!    turn by its rotation and keep its shape, and the least-squares fit spreads what cannot
+//!    be kept. `C` clamps the gradient's stretches (singular values) to `[½, 2]`, so a
+//!    squeezed tetrahedron is never asked to shrink further. The matrix
+//!    `K = Σ_t V_t G_tᵀ G_t` (the cotangent Laplacian) is factored once, one vertex pinned.
+//!    The step towards the new positions is halved while a tetrahedron would turn inside out.
+//!
+//! until the area-weighted mean angle between the boundary normals and their axes falls below
+//! the tolerance, stops falling for ten iterations, or no step keeps every tetrahedron
+//! positive. Smoothing the rotations (step 2) instead of the positions is what makes the
+//! boundary charts grow flat and the transitions between labels sharpen into the polycube's
+//! edges over the iterations. (Gregson et al. smooth rotations of the surface normals the
+//! same way; the clamped stretch and the step control are ours.)
+//!
+//! # Labels
+//!
+//! Each boundary triangle is labelled with the axis nearest its deformed normal, then cleaned
+//! up: charts of fewer than three triangles join the label they share most edges with, a
+//! triangle two of whose three neighbours share another label takes it (a tooth on a chart's
+//! border), and a triangle whose three vertices all lie on charts of one other axis (it would
+//! be flattened onto the line where two planes meet) takes that label once. The
+//! parameterisation puts each triangle on an integer plane of its label's axis.
+//!
+//! # Frames
+//!
+//! The frame of tetrahedron `t` is the rotation part of the final deformation's gradient:
+//! `frame[k]` = row `k` of `P(∇y|_t)`, the direction in the input in which the deformed
+//! coordinate `y_k` grows. The frames are one single-valued rotation field, so every
+//! matching is the identity by construction and no interior edge is singular: the polycube
+//! map's singularities are its convex and concave boundary edges, which boundary alignment
+//! handles. (The matchings must not be recomputed as the nearest cube rotation: next to a
+//! polycube edge neighbouring frames can differ by nearly a quarter turn.) Boundary alignment
+//! puts each chart on an integer plane, and the parameterisation ([`super::param`]) is a
+//! polycube map; the deformation's gradients ([`Polycube::gradients`]) are a second set of
+//! targets for it, a map already nearly axis-aligned with no tetrahedron inverted. A
+//! tetrahedron the deformation turns inside out (`det ∇y ≤ 0`, which the step control
+//! prevents) is counted in the report.
+
+use nalgebra::{Matrix3, Rotation3, Vector3};
+
+use super::mesh::{FACE_OPPOSITE, Frame, NO_TET, TetMesh};
+use super::topology::Topology;
+use crate::spline::solve::{CholeskyFactor, Triplets};
+
+/// Parameters of [`polycube_frames`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct PolycubeParams {
+    /// Most deformation iterations.
+    pub iterations: usize,
+    /// Stop when the area-weighted mean angle (degrees) between boundary normals and their
+    /// axes is below this.
+    pub tolerance_degrees: f64,
+    /// Weight `λ` of the boundary targets against the smoothness of the rotations.
+    pub boundary_weight: f64,
+}
+
+impl Default for PolycubeParams {
+    fn default() -> Self {
+        PolycubeParams {
+            iterations: 200,
+            tolerance_degrees: 1.0,
+            boundary_weight: 1.0,
+        }
+    }
+}
+
+/// What [`polycube_frames`] measured.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct PolycubeReport {
+    /// Deformation iterations run.
+    pub iterations: usize,
+    /// Area-weighted mean angle (degrees) between deformed boundary normals and their axes, at
+    /// the start and at the end.
+    pub mean_deviation_start: f64,
+    /// As `mean_deviation_start`, at the end.
+    pub mean_deviation: f64,
+    /// Fraction of the deformed boundary area within 5° of its axis.
+    pub aligned_fraction: f64,
+    /// Boundary triangles per cleaned-up label `+x −x +y −y +z −z`.
+    pub labels: [usize; 6],
+    /// Tetrahedra the deformation turned inside out.
+    pub flipped: usize,
+}
+
+/// The deformation and the frames read off it.
+#[derive(Clone, Debug)]
+pub struct Polycube {
+    /// Per tetrahedron, the rotation part of the deformation's gradient (module docs).
+    pub frames: Vec<Frame>,
+    /// Per tetrahedron, the deformation's gradient (rows `∇y₀`, `∇y₁`, `∇y₂`).
+    pub gradients: Vec<Frame>,
+    /// Per boundary face (in [`Topology::boundary`]'s order), the axis of its cleaned-up
+    /// label: the plane it is put on.
+    pub axes: Vec<u8>,
+    /// The deformed vertex positions.
+    pub deformed: Vec<[f64; 3]>,
+    /// What was measured.
+    pub report: PolycubeReport,
+}
+
+/// Why the frames could not be made.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum PolycubeError {
+    /// A sparse factorisation failed.
+    #[error("the polycube deformation's linear system could not be solved: {0}")]
+    Solve(String),
+}
+
+/// Gradients of a tetrahedron's four barycentric functions, and its volume.
+fn gradients(c: &[[f64; 3]; 4]) -> ([Vector3<f64>; 4], f64) {
+    let p: [Vector3<f64>; 4] = c.map(Vector3::from);
+    let (e1, e2, e3) = (p[1] - p[0], p[2] - p[0], p[3] - p[0]);
+    let det = e1.dot(&e2.cross(&e3));
+    let g1 = e2.cross(&e3) / det;
+    let g2 = e3.cross(&e1) / det;
+    let g3 = e1.cross(&e2) / det;
+    ([-(g1 + g2 + g3), g1, g2, g3], det / 6.0)
+}
+
+/// The rotation nearest `m` (polar decomposition, reflections removed).
+fn nearest_rotation(m: &Matrix3<f64>) -> Matrix3<f64> {
+    let svd = m.svd(true, true);
+    let (Some(u), Some(v_t)) = (svd.u, svd.v_t) else {
+        return Matrix3::identity();
+    };
+    let mut r = u * v_t;
+    if r.determinant() < 0.0 {
+        // Singular values come sorted, largest first: flip the weakest direction.
+        let mut u = u;
+        for row in 0..3 {
+            u[(row, 2)] = -u[(row, 2)];
+        }
+        r = u * v_t;
+    }
+    r
+}
+
+/// A deformation gradient's stretches kept within `[lo, 1/lo]` (its singular values clamped;
+/// a reflection stays): a target never asks a tetrahedron that is already squeezed to
+/// shrink further, so the deformation does not stall on one nearly flat tetrahedron.
+fn clamp_stretch(m: &Matrix3<f64>, lo: f64) -> Matrix3<f64> {
+    let svd = m.svd(true, true);
+    let (Some(u), Some(v_t)) = (svd.u, svd.v_t) else {
+        return *m;
+    };
+    let s = svd.singular_values.map(|x| x.clamp(lo, 1.0 / lo));
+    u * Matrix3::from_diagonal(&s) * v_t
+}
+
+/// Smallest stretch a deformation target keeps ([`clamp_stretch`]).
+const STRETCH: f64 = 0.5;
+
+/// The signed axis (0..6: +x −x +y −y +z −z) nearest the unit vector `n`, and the axis.
+fn label(n: &Vector3<f64>) -> (usize, Vector3<f64>) {
+    let k = (0..3)
+        .max_by(|&a, &b| n[a].abs().total_cmp(&n[b].abs()))
+        .expect("three axes");
+    let mut a = Vector3::zeros();
+    a[k] = n[k].signum();
+    (2 * k + usize::from(n[k] < 0.0), a)
+}
+
+/// Deformation state: positions and per-tetrahedron gradients.
+struct Deformation<'a> {
+    mesh: &'a TetMesh,
+    grads: Vec<[Vector3<f64>; 4]>,
+}
+
+impl Deformation<'_> {
+    fn jacobian(&self, y: &[[f64; 3]], t: usize) -> Matrix3<f64> {
+        let mut j = Matrix3::zeros();
+        for (k, &v) in self.mesh.tets[t].iter().enumerate() {
+            j += Vector3::from(y[v as usize]) * self.grads[t][k].transpose();
+        }
+        j
+    }
+}
+
+/// Outward normal and area of boundary face `k` at positions `y`.
+fn boundary_face(mesh: &TetMesh, topo: &Topology, y: &[[f64; 3]], k: usize) -> (Vector3<f64>, f64) {
+    let (t, i) = topo.boundary[k];
+    let f = FACE_OPPOSITE[i as usize].map(|j| Vector3::from(y[mesh.tets[t as usize][j] as usize]));
+    let n = (f[1] - f[0]).cross(&(f[2] - f[0]));
+    let a = n.norm();
+    (if a > 0.0 { n / a } else { n }, a / 2.0)
+}
+
+/// Area-weighted mean deviation (degrees) of the boundary normals at `y` from their axes, the
+/// fraction of area within 5°, and the labels.
+fn deviation(mesh: &TetMesh, topo: &Topology, y: &[[f64; 3]]) -> (f64, f64, [usize; 6]) {
+    let (mut sum, mut within, mut area) = (0.0, 0.0, 0.0);
+    let mut labels = [0; 6];
+    for k in 0..topo.boundary.len() {
+        let (n, a) = boundary_face(mesh, topo, y, k);
+        let (l, axis) = label(&n);
+        labels[l] += 1;
+        let angle = n.dot(&axis).clamp(-1.0, 1.0).acos().to_degrees();
+        sum += a * angle;
+        area += a;
+        if angle <= 5.0 {
+            within += a;
+        }
+    }
+    let area = area.max(f64::MIN_POSITIVE);
+    (sum / area, within / area, labels)
+}
+
+/// Passes of the label clean-up before it gives up (each pass only relabels).
+const CLEANUP_PASSES: usize = 50;
+
+/// Triangles a chart needs to stay a chart of its own.
+const MIN_CHART: usize = 3;
+
+/// The boundary faces' labels (`2 axis + [negative]`) from the deformed normals, cleaned up
+/// (module docs): charts of fewer than [`MIN_CHART`] triangles take the label they share
+/// the most edges with, and a triangle whose three vertices all lie on charts of another axis
+/// (it would be flattened onto a line between two planes) takes that chart's label.
+fn clean_labels(mesh: &TetMesh, topo: &Topology, y: &[[f64; 3]]) -> Vec<u8> {
+    let nf = topo.boundary.len();
+    let tris = topo.boundary_triangles(mesh);
+    let mut lab: Vec<u8> = (0..nf)
+        .map(|k| label(&boundary_face(mesh, topo, y, k).0).0 as u8)
+        .collect();
+    // Triangles across each triangle's edges.
+    let mut edges: Vec<([u32; 2], u32)> = Vec::with_capacity(3 * nf);
+    for (k, t) in tris.iter().enumerate() {
+        for e in 0..3 {
+            let (a, b) = (t[e], t[(e + 1) % 3]);
+            edges.push(([a.min(b), a.max(b)], k as u32));
+        }
+    }
+    edges.sort_unstable();
+    let mut adj: Vec<Vec<u32>> = vec![Vec::new(); nf];
+    for w in edges.chunks(2) {
+        if let [(ea, a), (eb, b)] = w
+            && ea == eb
+        {
+            adj[*a as usize].push(*b);
+            adj[*b as usize].push(*a);
+        }
+    }
+    let mut relabelled = vec![false; nf];
+    for _ in 0..CLEANUP_PASSES {
+        let mut changed = false;
+        // Small charts.
+        let mut chart = vec![u32::MAX; nf];
+        for s in 0..nf {
+            if chart[s] != u32::MAX {
+                continue;
+            }
+            let mut members = vec![s as u32];
+            chart[s] = s as u32;
+            let mut k = 0;
+            while k < members.len() {
+                let f = members[k] as usize;
+                k += 1;
+                for &g in &adj[f] {
+                    if chart[g as usize] == u32::MAX && lab[g as usize] == lab[s] {
+                        chart[g as usize] = s as u32;
+                        members.push(g);
+                    }
+                }
+            }
+            if members.len() < MIN_CHART {
+                let mut border = [0usize; 6];
+                for &f in &members {
+                    for &g in &adj[f as usize] {
+                        if lab[g as usize] != lab[s] {
+                            border[lab[g as usize] as usize] += 1;
+                        }
+                    }
+                }
+                let best = (0..6).max_by_key(|&l| (border[l], std::cmp::Reverse(l)));
+                if let Some(best) = best.filter(|&l| border[l] > 0) {
+                    for &f in &members {
+                        lab[f as usize] = best as u8;
+                    }
+                    changed = true;
+                }
+            }
+        }
+        // Teeth: a triangle two of whose neighbours share another label takes it.
+        for k in 0..nf {
+            let n = &adj[k];
+            for (i, &a) in n.iter().enumerate() {
+                let l = lab[a as usize];
+                if l != lab[k] && n[i + 1..].iter().any(|&b| lab[b as usize] == l) {
+                    lab[k] = l;
+                    changed = true;
+                    break;
+                }
+            }
+        }
+        // Triangles on a line between two planes.
+        let mut on = vec![0u8; mesh.verts.len()];
+        for (k, t) in tris.iter().enumerate() {
+            for &v in t {
+                on[v as usize] |= 1 << lab[k];
+            }
+        }
+        for (k, t) in tris.iter().enumerate() {
+            let common = t.iter().fold(0x3f, |m, &v| m & on[v as usize]);
+            let axis = lab[k] / 2;
+            if let Some(other) = (0..6u8).find(|&l| l / 2 != axis && common & (1 << l) != 0)
+                && adj[k].iter().any(|&g| lab[g as usize] == other)
+                && !relabelled[k]
+            {
+                lab[k] = other;
+                relabelled[k] = true;
+                for &v in t {
+                    on[v as usize] |= 1 << other;
+                }
+                changed = true;
+            }
+        }
+        if !changed {
+            break;
+        }
+    }
+    lab
+}
+
+/// Polycube frames for the checked mesh (module docs), with the deformed positions.
+pub fn polycube_frames(
+    mesh: &TetMesh,
+    topo: &Topology,
+    params: &PolycubeParams,
+) -> Result<Polycube, PolycubeError> {
+    let nt = mesh.tets.len();
+    let nv = mesh.verts.len();
+    let (grads, volumes): (Vec<_>, Vec<_>) = (0..nt).map(|t| gradients(&mesh.corners(t))).unzip();
+    let def = Deformation { mesh, grads };
+
+    // K = Σ V Gᵀ G, one vertex pinned; a tiny shift keeps unused vertices at rest.
+    let mut k = Triplets::new(nv);
+    let mut trace = 0.0;
+    for t in 0..nt {
+        let tet = mesh.tets[t];
+        for a in 0..4 {
+            for b in 0..4 {
+                let (va, vb) = (tet[a] as usize, tet[b] as usize);
+                if vb <= va {
+                    let h = volumes[t] * def.grads[t][a].dot(&def.grads[t][b]);
+                    k.push(va, vb, h);
+                    if va == vb {
+                        trace += h;
+                    }
+                }
+            }
+        }
+    }
+    let mean = trace / nv.max(1) as f64;
+    let pinned = mesh.tets[0][0] as usize;
+    for v in 0..nv {
+        k.push(v, v, 1e-10 * mean);
+    }
+    k.push(pinned, pinned, mean);
+    let kf = CholeskyFactor::new(&mut k).map_err(PolycubeError::Solve)?;
+
+    // L: graph Laplacian of the tetrahedra plus the boundary weights.
+    let areas: Vec<f64> = (0..topo.boundary.len())
+        .map(|f| boundary_face(mesh, topo, &mesh.verts, f).1)
+        .collect();
+    let mean_area = areas.iter().sum::<f64>() / areas.len().max(1) as f64;
+    let weights: Vec<f64> = areas
+        .iter()
+        .map(|a| params.boundary_weight * a / mean_area.max(f64::MIN_POSITIVE))
+        .collect();
+    let mut l = Triplets::new(nt);
+    for t in 0..nt {
+        for &s in &topo.neighbours[t] {
+            if s != NO_TET && (s as usize) < t {
+                l.push(t, t, 1.0);
+                l.push(s as usize, s as usize, 1.0);
+                l.push(t, s as usize, -1.0);
+            }
+        }
+        l.push(t, t, 1e-10);
+    }
+    for (f, &(t, _)) in topo.boundary.iter().enumerate() {
+        l.push(t as usize, t as usize, weights[f]);
+    }
+    let lf = CholeskyFactor::new(&mut l).map_err(PolycubeError::Solve)?;
+
+    let mut y = mesh.verts.clone();
+    let (start, _, _) = deviation(mesh, topo, &y);
+    let mut report = PolycubeReport {
+        mean_deviation_start: start,
+        mean_deviation: start,
+        ..PolycubeReport::default()
+    };
+    let mut best = (start, y.clone());
+    let mut stale = 0;
+    while report.iterations < params.iterations && report.mean_deviation > params.tolerance_degrees
+    {
+        // 1–2: boundary targets, spread over the tetrahedra.
+        let mut rhs = vec![[0.0; 3]; nt];
+        for (f, &(t, _)) in topo.boundary.iter().enumerate() {
+            let (n, _) = boundary_face(mesh, topo, &y, f);
+            let (_, a) = label(&n);
+            let axis = n.cross(&a);
+            let s = axis.norm();
+            if s > 1e-12 {
+                let rho = axis * (s.atan2(n.dot(&a)) / s);
+                for d in 0..3 {
+                    rhs[t as usize][d] += weights[f] * rho[d];
+                }
+            }
+        }
+        let r = lf.solve(&rhs);
+        // 3: rigid targets, solved for positions.
+        let mut b = vec![[0.0; 3]; nv];
+        for t in 0..nt {
+            let turn = Rotation3::new(Vector3::from(r[t])).into_inner();
+            let q = turn * clamp_stretch(&def.jacobian(&y, t), STRETCH);
+            for (a, &v) in mesh.tets[t].iter().enumerate() {
+                let qg = q * def.grads[t][a] * volumes[t];
+                for d in 0..3 {
+                    b[v as usize][d] += qg[d];
+                }
+            }
+        }
+        for d in 0..3 {
+            b[pinned][d] += mean * y[pinned][d];
+        }
+        let target = kf.solve(&b);
+        // Step towards the solve's positions, halving the step while a tetrahedron would
+        // turn inside out (a tetrahedron already flipped does not count).
+        let flipped_now: Vec<bool> = (0..nt)
+            .map(|t| def.jacobian(&y, t).determinant() <= 0.0)
+            .collect();
+        let mut step = 1.0;
+        let next = loop {
+            let cand: Vec<[f64; 3]> = y
+                .iter()
+                .zip(&target)
+                .map(|(a, b)| std::array::from_fn(|d| a[d] + step * (b[d] - a[d])))
+                .collect();
+            let ok = (0..nt).all(|t| flipped_now[t] || def.jacobian(&cand, t).determinant() > 0.0);
+            if ok || step < 1e-3 {
+                break ok.then_some(cand);
+            }
+            step *= 0.5;
+        };
+        let Some(next) = next else {
+            break;
+        };
+        y = next;
+        report.iterations += 1;
+        let (dev, _, _) = deviation(mesh, topo, &y);
+        report.mean_deviation = dev;
+        if dev < best.0 - 1e-3 {
+            best = (dev, y.clone());
+            stale = 0;
+        } else {
+            stale += 1;
+            if stale >= 10 {
+                break;
+            }
+        }
+    }
+    let y = best.1;
+    let (dev, within, _) = deviation(mesh, topo, &y);
+    report.mean_deviation = dev;
+    report.aligned_fraction = within;
+    let rows = |r: &Matrix3<f64>| [0, 1, 2].map(|row| [r[(row, 0)], r[(row, 1)], r[(row, 2)]]);
+    let mut frames = Vec::with_capacity(nt);
+    let mut gradients = Vec::with_capacity(nt);
+    for t in 0..nt {
+        let j = def.jacobian(&y, t);
+        if j.determinant() <= 0.0 {
+            report.flipped += 1;
+        }
+        frames.push(rows(&nearest_rotation(&j)));
+        gradients.push(rows(&j));
+    }
+    let labels = clean_labels(mesh, topo, &y);
+    for l in &labels {
+        report.labels[*l as usize] += 1;
+    }
+    Ok(Polycube {
+        axes: labels.iter().map(|l| l / 2).collect(),
+        frames,
+        gradients,
+        deformed: y,
+        report,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::hex::frames::{matchings, singularities};
+    use crate::hex::param::{Field, ParamParams, param_volume, parameterise_with};
+    use crate::hex::rotation::Rot;
+    use crate::hex::topology::check_tets;
+
+    /// The grid box rotated by `r` about the origin.
+    fn turned_box(r: &Matrix3<f64>) -> TetMesh {
+        let mut m = TetMesh::grid_box([4, 3, 2], 0.5);
+        for p in &mut m.verts {
+            let q = r * Vector3::from(*p);
+            *p = [q[0], q[1], q[2]];
+        }
+        m
+    }
+
+    #[test]
+    fn an_axis_aligned_box_is_already_a_polycube() {
+        let m = TetMesh::grid_box([3, 3, 2], 1.0);
+        let topo = check_tets(&m).unwrap();
+        let Polycube {
+            frames,
+            deformed: y,
+            report: rep,
+            ..
+        } = polycube_frames(&m, &topo, &PolycubeParams::default()).unwrap();
+        assert_eq!(rep.iterations, 0);
+        assert_eq!(rep.flipped, 0);
+        assert!(rep.mean_deviation < 1e-9);
+        assert_eq!(y, m.verts);
+        for f in frames {
+            for (a, b) in f
+                .iter()
+                .flatten()
+                .zip(super::super::frames::IDENTITY.iter().flatten())
+            {
+                assert!((a - b).abs() < 1e-12);
+            }
+        }
+    }
+
+    #[test]
+    fn a_turned_box_is_turned_back_and_its_frames_follow_its_edges() {
+        let r = Rotation3::new(Vector3::new(0.2, -0.3, 0.25)).into_inner();
+        let m = turned_box(&r);
+        let topo = check_tets(&m).unwrap();
+        let Polycube {
+            frames,
+            report: rep,
+            ..
+        } = polycube_frames(&m, &topo, &PolycubeParams::default()).unwrap();
+        assert!(rep.mean_deviation_start > 10.0, "{rep:?}");
+        assert!(rep.mean_deviation < 1.0, "{rep:?}");
+        assert_eq!(rep.flipped, 0);
+        // Each frame axis is within 8° of one of the box's turned edges (the iteration stops
+        // at a mean boundary deviation of 1°).
+        for f in &frames {
+            for axis in f {
+                let a = Vector3::from(*axis);
+                let best = (0..3)
+                    .map(|c| a.dot(&r.column(c)).abs())
+                    .fold(0.0, f64::max);
+                assert!(best > 0.99, "{axis:?}");
+            }
+        }
+        let m2 = matchings(&frames, &topo);
+        assert!(m2.iter().flatten().all(|&x| x == Rot::ID));
+        assert!(singularities(&m, &topo, &frames, &m2).edges.is_empty());
+    }
+
+    #[test]
+    fn a_rounded_solid_gets_charts_and_no_interior_singularity() {
+        // A cylinder of radius 1 and height 1 along z, stuffed with tetrahedra: the
+        // deformation squares its cross-section.
+        let f = |p: [f64; 3]| (p[0].hypot(p[1]) - 1.0).max(p[2].abs() - 0.5);
+        let (m, _) = crate::hex::stuffing::stuff(
+            &f,
+            [-1.2, -1.2, -0.7],
+            [1.2, 1.2, 0.7],
+            &crate::hex::stuffing::StuffingParams::new(0.2),
+        )
+        .unwrap();
+        let topo = check_tets(&m).unwrap();
+        let Polycube {
+            frames,
+            gradients,
+            axes,
+            report: rep,
+            ..
+        } = polycube_frames(&m, &topo, &PolycubeParams::default()).unwrap();
+        assert!(
+            rep.mean_deviation < rep.mean_deviation_start / 3.0,
+            "{rep:?}"
+        );
+        assert_eq!(rep.flipped, 0, "{rep:?}");
+        assert!(rep.labels.iter().all(|&n| n > 0), "{rep:?}");
+        // No interior singularity, and the polycube map flips nothing at three scales,
+        // drawn towards the frames or towards the deformation.
+        let ident = vec![[Rot::ID; 4]; m.tets.len()];
+        let sing = singularities(&m, &topo, &frames, &ident);
+        assert!(sing.edges.is_empty() && sing.invalid.is_empty());
+        for targets in [&frames, &gradients] {
+            for scale in [0.5, 0.35, 0.25] {
+                let (map, rep) = parameterise_with(
+                    &m,
+                    &topo,
+                    &Field {
+                        frames: &frames,
+                        targets,
+                        axes: Some(&axes),
+                        matchings: &ident,
+                        singular: &[],
+                    },
+                    &ParamParams {
+                        scale,
+                        ..Default::default()
+                    },
+                )
+                .unwrap();
+                assert_eq!(rep.flipped_final, 0, "{scale}: {rep:?}");
+                assert!(map.uvw.iter().all(|u| param_volume(u) > 0.0));
+                assert!(rep.integer_unknowns > 0);
+            }
+        }
+    }
+}
