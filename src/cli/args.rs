@@ -551,6 +551,15 @@ pub struct ReconstructArgs {
     /// the GPU path is not yet measured faster end to end.
     #[arg(long, value_enum, default_value_t = GpuChoice::Off)]
     pub gpu: GpuChoice,
+    /// Then mesh the inside of the reconstructed surface with hexahedra (as `hexmesh OUTPUT
+    /// -o HEX` with polycube frames) and write them here: .vtk, .mesh or .msh. Needs a
+    /// closed surface (no --trim).
+    #[arg(long, conflicts_with = "trim")]
+    pub hex: Option<PathBuf>,
+    /// Hexahedron edge for --hex, in input units (default: a twentieth of the surface's
+    /// bounding-box diagonal).
+    #[arg(long, requires = "hex", allow_negative_numbers = true)]
+    pub hex_scale: Option<f64>,
     /// Normal options.
     #[command(flatten)]
     pub normal: NormalOpts,

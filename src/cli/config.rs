@@ -350,6 +350,8 @@ pub struct ReconstructConfig {
     pub params: ReconParams,
     /// Keep the work directory after success.
     pub keep_work: bool,
+    /// `--hex`: hexahedra of the reconstructed surface's inside.
+    pub hex: Option<scanflow::pipeline::hexmesh::HexJob>,
 }
 
 impl ReconstructConfig {
@@ -400,6 +402,27 @@ impl ReconstructConfig {
         params.sigma_vox = smooth;
         params.fit = !a.no_fit;
         params.gpu = a.gpu.into();
+        let hex = match a.hex {
+            Some(h) => {
+                hex_scale(a.hex_scale, "--hex-scale")?;
+                paths::output_file_as("--hex", &h, VOLUME_EXTS, "a hexahedral mesh")?;
+                paths::not_an_input(&h, &given)?;
+                if h == a.output {
+                    bail!("--hex {}: the same file as -o", h.display());
+                }
+                Some(scanflow::pipeline::hexmesh::HexJob {
+                    input: a.output.clone(),
+                    output: h,
+                    frames: scanflow::pipeline::hexmesh::FrameChoice::Polycube,
+                    scale: a.hex_scale,
+                    tet_size: None,
+                    pillow: None,
+                    relax: true,
+                    keep_inverted: false,
+                })
+            }
+            None => None,
+        };
         let points = Points::new(a.inputs, a.conf, &a.normal)?;
         Ok(ReconstructConfig {
             run,
@@ -407,6 +430,7 @@ impl ReconstructConfig {
             output: a.output,
             params,
             keep_work: a.keep_work,
+            hex,
         })
     }
 }
@@ -520,6 +544,16 @@ pub struct HexmeshConfig {
     pub report: Option<PathBuf>,
 }
 
+/// A hexahedron edge given as `option` must be positive and finite.
+fn hex_scale(scale: Option<f64>, option: &str) -> Result<()> {
+    if let Some(x) = scale
+        && !(x.is_finite() && x > 0.0)
+    {
+        bail!("{option} {x}: the hexahedron edge must be a positive number of input units");
+    }
+    Ok(())
+}
+
 /// The extensions of the volume meshes scanflow writes.
 const VOLUME_EXTS: &[&str] = &["vtk", "mesh", "msh"];
 
@@ -543,11 +577,7 @@ impl HexmeshConfig {
                 ),
             },
         };
-        if let Some(x) = a.scale
-            && !(x.is_finite() && x > 0.0)
-        {
-            bail!("--scale {x}: the hexahedron edge must be a positive number of input units");
-        }
+        hex_scale(a.scale, "--scale")?;
         if let Some(x) = a.tet_size
             && !(x.is_finite() && x > 0.0)
         {

@@ -1,10 +1,12 @@
 //! `scanflow hexmesh` and `scanflow hexcheck`: hexahedra by CubeCover, and their quality.
 
+use std::path::Path;
+
 use anyhow::{Result, bail};
 
 use scanflow::exec::Ctx;
 use scanflow::hex::quality::mesh_quality;
-use scanflow::pipeline::hexmesh::hexmesh;
+use scanflow::pipeline::hexmesh::{HexStats, hexmesh};
 
 use super::args::HexcheckArgs;
 use super::config::HexmeshConfig;
@@ -17,6 +19,12 @@ pub fn run(c: &HexmeshConfig, ctx: &Ctx) -> Result<()> {
         let text = serde_json::to_string_pretty(&st)?;
         scanflow::io::atomic::write(p, text.as_bytes(), scanflow::io::atomic::Durability::Synced)?;
     }
+    summary(&st, &c.job.output)
+}
+
+/// Print what a hexmesh run measured and the quality table; an error when hexahedra are
+/// inverted (they were written only under `--keep-inverted`).
+pub fn summary(st: &HexStats, output: &Path) -> Result<()> {
     let [v3, v5, v6] = st.singular_by_valence;
     outln!(
         "{} tetrahedra → {} hexahedra ({} vertices) at edge {:.6}",
@@ -29,6 +37,16 @@ pub fn run(c: &HexmeshConfig, ctx: &Ctx) -> Result<()> {
         "singular edges: {v3} of valence 3, {v5} of valence 5, {v6} of valence 2 or 6; {} nodes",
         st.singularities.nodes.len()
     );
+    if let Some(p) = &st.polycube {
+        outln!(
+            "polycube deformation: boundary normals {:.1}° → {:.1}° from their axes (mean) in {} iterations, {:.0}% of the area within 5°; {} chords split",
+            p.mean_deviation_start,
+            p.mean_deviation,
+            p.iterations,
+            100.0 * p.aligned_fraction,
+            st.chords_split
+        );
+    }
     outln!(
         "parameterisation: {} unknowns ({} integer), {} rounding rounds, alignment energy {:.4e} → {:.4e}",
         st.param.unknowns,
@@ -37,6 +55,13 @@ pub fn run(c: &HexmeshConfig, ctx: &Ctx) -> Result<()> {
         st.param.energy_continuous,
         st.param.energy_final
     );
+    if let Some(p) = &st.pillow {
+        outln!(
+            "pillowing: {} boundary hexahedra added ({} had two or more faces on the boundary)",
+            p.boundary_quads,
+            p.multi_face_hexes
+        );
+    }
     let s = st.seconds;
     outln!(
         "time: read {:.2} s, frames {:.2} s, parameterisation {:.2} s, extraction {:.2} s, relaxation {:.2} s",
@@ -47,11 +72,11 @@ pub fn run(c: &HexmeshConfig, ctx: &Ctx) -> Result<()> {
         s[4]
     );
     outln!("{}", st.quality.table());
-    outln!("wrote {}", c.job.output.display());
+    outln!("wrote {}", output.display());
     if st.quality.inverted > 0 {
         bail!(
             "{}: {} of {} hexahedra are inverted",
-            c.job.output.display(),
+            output.display(),
             st.quality.inverted,
             st.quality.hexes
         );

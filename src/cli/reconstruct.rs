@@ -24,6 +24,10 @@ use super::{paths, report, signals};
 pub fn run(c: &ReconstructConfig, ctx: &Ctx) -> Result<()> {
     let st = reconstruct(ctx, &c.points, &c.output, &c.params, c.keep_work)?;
     report::reconstruct(&st, &c.output);
+    if let Some(job) = &c.hex {
+        let st = scanflow::pipeline::hexmesh::hexmesh(job, ctx)?;
+        super::hex::summary(&st, &job.output)?;
+    }
     Ok(())
 }
 

@@ -375,3 +375,64 @@ fn a_cylinder_becomes_hexes_by_a_polycube_map_with_none_inverted() {
     assert!(c["reference"]["mean"].as_f64().unwrap() < 0.05, "{c}");
     assert!(c["reference"]["max"].as_f64().unwrap() < 0.25, "{c}");
 }
+
+#[test]
+fn a_scanned_torus_is_reconstructed_then_meshed_with_hexes() {
+    // Points of a torus → reconstruct → the surface stuffed, polycube map, hexahedra: one
+    // command. Bad --hex options are refused before any work.
+    let d = tempfile::tempdir().unwrap();
+    let pts = d.path().join("torus.ply");
+    ok(&[
+        "synth",
+        "torus",
+        "--points",
+        "30000",
+        "-o",
+        s(&pts),
+        "--progress",
+        "none",
+    ]);
+    let mesh = d.path().join("torus_mesh.ply");
+    let hex = d.path().join("torus_hex.msh");
+    for (bad, what) in [
+        (vec!["--hex", "x.ply"], "--hex"),
+        (vec!["--hex", "h.vtk", "--hex-scale", "0"], "--hex-scale"),
+    ] {
+        let mut args = vec!["reconstruct", s(&pts), "-o", s(&mesh), "--depth", "6"];
+        args.extend(bad);
+        let o = run(&args);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{err}");
+        assert!(err.contains(what), "{err}");
+        assert!(!mesh.exists());
+    }
+    let text = ok(&[
+        "reconstruct",
+        s(&pts),
+        "-o",
+        s(&mesh),
+        "--depth",
+        "6",
+        "--hex",
+        s(&hex),
+        "--hex-scale",
+        HEX_TORUS_SCALE,
+        "--progress",
+        "none",
+    ]);
+    assert!(text.contains("polycube deformation"), "{text}");
+    assert!(text.contains("scaled Jacobian"), "{text}");
+    let q = ok(&["hexcheck", s(&hex), "--json"]);
+    let q: serde_json::Value = serde_json::from_str(&q).unwrap();
+    assert_eq!(q["inverted"].as_u64(), Some(0), "{q}");
+    assert!(q["hexes"].as_u64().unwrap() > 100, "{q}");
+    let Some(c) = hex_check(&hex, Some(&mesh)) else {
+        return;
+    };
+    assert_eq!(c["scaled_jacobian"]["count_le_0"].as_u64(), Some(0), "{c}");
+    assert_eq!(c["boundary"]["closed"].as_bool(), Some(true), "{c}");
+    assert!(c["reference"]["mean"].as_f64().unwrap() < 0.05, "{c}");
+}
+
+/// The hex edge of the reconstructed-torus test.
+const HEX_TORUS_SCALE: &str = "0.2";
