@@ -419,7 +419,7 @@ fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
 }
 
 /// Gradients of the four barycentric functions of a tetrahedron.
-fn gradients(c: &[[f64; 3]; 4]) -> [[f64; 3]; 4] {
+pub(crate) fn gradients(c: &[[f64; 3]; 4]) -> [[f64; 3]; 4] {
     let e = [sub(c[1], c[0]), sub(c[2], c[0]), sub(c[3], c[0])];
     let det = dot(e[0], cross(e[1], e[2]));
     // Rows of the inverse transpose: ∇φ₁ = (e₁ × e₂)/det, …

@@ -57,6 +57,7 @@
 use nalgebra::{Matrix3, Rotation3, Vector3};
 
 use super::mesh::{FACE_OPPOSITE, Frame, NO_TET, TetMesh};
+use super::param::gradients;
 use super::topology::Topology;
 use crate::spline::solve::{CholeskyFactor, Triplets};
 
@@ -122,17 +123,6 @@ pub enum PolycubeError {
     /// A sparse factorisation failed.
     #[error("the polycube deformation's linear system could not be solved: {0}")]
     Solve(String),
-}
-
-/// Gradients of a tetrahedron's four barycentric functions, and its volume.
-fn gradients(c: &[[f64; 3]; 4]) -> ([Vector3<f64>; 4], f64) {
-    let p: [Vector3<f64>; 4] = c.map(Vector3::from);
-    let (e1, e2, e3) = (p[1] - p[0], p[2] - p[0], p[3] - p[0]);
-    let det = e1.dot(&e2.cross(&e3));
-    let g1 = e2.cross(&e3) / det;
-    let g2 = e3.cross(&e1) / det;
-    let g3 = e1.cross(&e2) / det;
-    ([-(g1 + g2 + g3), g1, g2, g3], det / 6.0)
 }
 
 /// The rotation nearest `m` (polar decomposition, reflections removed).
@@ -346,7 +336,10 @@ pub fn polycube_frames(
 ) -> Result<Polycube, PolycubeError> {
     let nt = mesh.tets.len();
     let nv = mesh.verts.len();
-    let (grads, volumes): (Vec<_>, Vec<_>) = (0..nt).map(|t| gradients(&mesh.corners(t))).unzip();
+    let grads: Vec<[Vector3<f64>; 4]> = (0..nt)
+        .map(|t| gradients(&mesh.corners(t)).map(Vector3::from))
+        .collect();
+    let volumes: Vec<f64> = (0..nt).map(|t| mesh.volume(t)).collect();
     let def = Deformation { mesh, grads };
 
     // K = Σ V Gᵀ G, one vertex pinned; a tiny shift keeps unused vertices at rest.
