@@ -419,6 +419,7 @@ impl ReconstructConfig {
                     pillow: None,
                     relax: true,
                     keep_inverted: false,
+                    report: None,
                 })
             }
             None => None,
@@ -538,10 +539,8 @@ impl DemoConfig {
 pub struct HexmeshConfig {
     /// Threads, memory, progress.
     pub run: RunConfig,
-    /// The run.
+    /// The run (`--report` in it).
     pub job: scanflow::pipeline::hexmesh::HexJob,
-    /// `--report`.
-    pub report: Option<PathBuf>,
 }
 
 /// A hexahedron edge given as `option` must be positive and finite.
@@ -607,8 +606,8 @@ impl HexmeshConfig {
                 },
                 relax: !a.no_relax,
                 keep_inverted: a.keep_inverted,
+                report: a.report,
             },
-            report: a.report,
         })
     }
 }

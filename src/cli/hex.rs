@@ -15,10 +15,6 @@ use super::config::HexmeshConfig;
 /// were written only under `--keep-inverted`).
 pub fn run(c: &HexmeshConfig, ctx: &Ctx) -> Result<()> {
     let st = hexmesh(&c.job, ctx)?;
-    if let Some(p) = &c.report {
-        let text = serde_json::to_string_pretty(&st)?;
-        scanflow::io::atomic::write(p, text.as_bytes(), scanflow::io::atomic::Durability::Synced)?;
-    }
     summary(&st, &c.job.output)
 }
 

@@ -58,6 +58,9 @@ pub struct HexJob {
     /// Add a layer of hexahedra along the boundary before relaxing ([`crate::hex::pillow`]);
     /// `None`: with polycube frames only.
     pub pillow: Option<bool>,
+    /// Where to write the run's figures (JSON): [`HexStats`] on success, what had been
+    /// measured and the error on failure.
+    pub report: Option<PathBuf>,
     /// Relax the hexahedra after extraction.
     pub relax: bool,
     /// Write the mesh even when some hexahedra are inverted.
@@ -171,12 +174,57 @@ fn bounds(verts: &[[f64; 3]]) -> Aabb {
     b
 }
 
-/// Runs `job` (module docs).
+/// What a failed run had measured when it stopped: the report written instead of
+/// [`HexStats`], so that a failure is a report as much as a message.
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct HexFailure {
+    /// The error, as printed.
+    pub error: String,
+    /// Tetrahedra meshed (after any stuffing and splitting).
+    pub tets: usize,
+    /// Target hex edge used.
+    pub scale: f64,
+    /// The stuffing of a surface input.
+    pub stuffing: Option<StuffingReport>,
+    /// The smooth field's figures.
+    pub smooth: Option<SmoothReport>,
+    /// The polycube deformation's figures.
+    pub polycube: Option<PolycubeReport>,
+    /// Interior edges between boundary vertices split before the polycube map.
+    pub chords_split: usize,
+    /// The parameterisation, when it ran (the rounding that flipped tetrahedra is named).
+    pub param: Option<ParamReport>,
+    /// The quality of the extracted hexahedra, when some were inverted.
+    pub quality: Option<MeshQuality>,
+    /// Seconds per step, as far as the run got.
+    pub seconds: [f64; 5],
+}
+
+/// Runs `job` (module docs); writes its report (figures or failure) when asked.
 pub fn hexmesh(job: &HexJob, ctx: &Ctx) -> Result<HexStats> {
+    let mut failure = HexFailure::default();
+    let out = run(job, ctx, &mut failure);
+    if let Some(p) = &job.report {
+        let text = match &out {
+            Ok(st) => serde_json::to_string_pretty(st),
+            Err(e) => {
+                failure.error = e.to_string();
+                serde_json::to_string_pretty(&failure)
+            }
+        }
+        .map_err(|e| Error::Internal(format!("report: {e}")))?;
+        crate::io::atomic::write(p, text.as_bytes(), crate::io::atomic::Durability::Synced)?;
+    }
+    out
+}
+
+fn run(job: &HexJob, ctx: &Ctx, failure: &mut HexFailure) -> Result<HexStats> {
     let path = &job.input;
     let mut seconds = [0.0; 5];
     let clock = Instant::now();
     let (mut mesh, mut topo, stuffing, scale) = read_tets(path, job.scale, job.tet_size)?;
+    failure.scale = scale;
+    failure.stuffing = stuffing.clone();
     let mut chords_split = 0;
     if job.frames == FrameChoice::Polycube {
         // A tetrahedron with all four vertices on one chart would be flattened onto its plane.
@@ -186,6 +234,8 @@ pub fn hexmesh(job: &HexJob, ctx: &Ctx) -> Result<HexStats> {
         }
     }
     seconds[0] = clock.elapsed().as_secs_f64();
+    failure.tets = mesh.tets.len();
+    failure.chords_split = chords_split;
 
     let clock = Instant::now();
     let polycube_run = job.frames == FrameChoice::Polycube;
@@ -220,6 +270,9 @@ pub fn hexmesh(job: &HexJob, ctx: &Ctx) -> Result<HexStats> {
     };
     let sing = frames::singularities(&mesh, &topo, &field, &m);
     seconds[1] = clock.elapsed().as_secs_f64();
+    failure.smooth = smooth.clone();
+    failure.polycube = polycube.as_ref().map(|p| p.report.clone());
+    failure.seconds = seconds;
     if let Some(first) = sing.invalid.first() {
         return Err(Error::input(
             path,
@@ -256,6 +309,8 @@ pub fn hexmesh(job: &HexJob, ctx: &Ctx) -> Result<HexStats> {
         }
     }
     seconds[2] = clock.elapsed().as_secs_f64();
+    failure.param = Some(param.clone());
+    failure.seconds = seconds;
     if param.flipped_final > 0 {
         let cause = match &param.first_flip {
             Some(c) => format!(
@@ -314,6 +369,8 @@ pub fn hexmesh(job: &HexJob, ctx: &Ctx) -> Result<HexStats> {
 
     let per_hex = ctx.pool.install(|| hex_qualities(&hexes));
     let quality = summarise(&per_hex);
+    failure.quality = Some(quality.clone());
+    failure.seconds = seconds;
     if quality.inverted > 0 && !job.keep_inverted {
         let worst: Vec<String> = quality
             .worst_hexes
