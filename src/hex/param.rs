@@ -125,9 +125,8 @@ pub struct GridMap {
 
 use std::collections::VecDeque;
 
-use faer::Side;
+use crate::spline::solve::{CholeskyFactor, Triplets};
 use faer::prelude::*;
-use faer::sparse::{SparseColMat, Triplet};
 
 use super::frames::{edge_holonomy, face_index};
 use super::mesh::{FACE_OPPOSITE, Frame, NO_TET, TetMesh};
@@ -656,6 +655,10 @@ pub fn parameterise_with(
         corner_cv[c] = cv_of_root[r];
     }
     report.cut_vertices = ncv as usize;
+    let mut cv_pos = vec![[0.0; 3]; ncv as usize];
+    for (c, &cv) in corner_cv.iter().enumerate() {
+        cv_pos[cv as usize] = mesh.verts[mesh.tets[c / 4][c % 4] as usize];
+    }
     let xvar = |t: usize, j: usize, r: usize| 3 * corner_cv[4 * t + j] + r as u32;
 
     // Integer variables.
@@ -802,7 +805,18 @@ pub fn parameterise_with(
         for (k, &v) in free.iter().enumerate() {
             index[v as usize] = k as u32;
         }
+        let points: Vec<[f64; 3]> = free
+            .iter()
+            .map(|&v| {
+                if v < base {
+                    cv_pos[(v / 3) as usize]
+                } else {
+                    [f64::NAN; 3]
+                }
+            })
+            .collect();
         let sys = System {
+            points: &points,
             elim: &elim,
             index: &index,
             corner_cv: &corner_cv,
@@ -1017,6 +1031,9 @@ fn describe_row(row: &[(u32, f64)], base: u32, names: &[IntegerVar]) -> String {
 
 /// The reduced normal equations over the free variables.
 struct System<'a> {
+    /// Per free variable, the position of its vertex (NaN for an integer unknown): the
+    /// factorisation's nested-dissection ordering.
+    points: &'a [[f64; 3]],
     elim: &'a Elim,
     index: &'a [u32],
     corner_cv: &'a [u32],
@@ -1097,10 +1114,10 @@ impl System<'_> {
             at.push((b, vars[b as usize].len() as u32));
             vars[b as usize].push(i);
         }
-        let mut entries: Vec<Vec<Triplet<usize, usize, f64>>> = vec![Vec::new(); vars.len()];
+        let mut entries: Vec<Triplets> = vars.iter().map(|v| Triplets::new(v.len())).collect();
         for &(r, c, v) in &merged {
             let (b, lr) = at[r as usize];
-            entries[b as usize].push(Triplet::new(lr as usize, at[c as usize].1 as usize, v));
+            entries[b as usize].push(lr as usize, at[c as usize].1 as usize, v);
         }
         let nnz = merged.len();
         drop(merged);
@@ -1108,21 +1125,16 @@ impl System<'_> {
         let blocks: Vec<Block> = vars
             .into_par_iter()
             .zip(entries)
-            .map(|(vars, entries)| {
-                let m = vars.len();
-                let a = SparseColMat::try_new_from_triplets(m, m, &entries)
-                    .map_err(|e| format!("{e:?}"))?;
-                let llt = a
-                    .sp_cholesky(Side::Lower)
-                    .map_err(|e| format!("sparse Cholesky failed: {e:?}"))?;
-                Ok(Block { vars, llt })
+            .map(|(vars, mut entries)| {
+                let points: Vec<[f64; 3]> = vars.iter().map(|&i| self.points[i as usize]).collect();
+                let factor = CholeskyFactor::with_points(&mut entries, &points)?;
+                Ok(Block { vars, factor })
             })
             .collect::<Result<_, String>>()?;
         let mut x0 = vec![0.0; n];
         for b in &blocks {
-            let x = b.llt.solve(Mat::from_fn(b.vars.len(), 1, |i, _| {
-                rhs[b.vars[i] as usize]
-            }));
+            let mut x = Mat::from_fn(b.vars.len(), 1, |i, _| rhs[b.vars[i] as usize]);
+            b.factor.solve_in_place(&mut x);
             for (i, &v) in b.vars.iter().enumerate() {
                 x0[v as usize] = x[(i, 0)];
             }
@@ -1140,7 +1152,7 @@ impl System<'_> {
 struct Block {
     /// Its free variables (indices into the free list), ascending.
     vars: Vec<u32>,
-    llt: faer::sparse::linalg::solvers::Llt<usize, f64>,
+    factor: CholeskyFactor,
 }
 
 /// The normal equations over the free variables, factored block by block.
@@ -1178,9 +1190,8 @@ impl<'a> Rounding<'a> {
                 let (b, l) = f.at[j as usize];
                 let block = &f.blocks[b as usize];
                 let m = block.vars.len();
-                let x = block.llt.solve(Mat::from_fn(m, 1, |i, _| {
-                    f64::from(u8::from(i == l as usize))
-                }));
+                let mut x = Mat::from_fn(m, 1, |i, _| f64::from(u8::from(i == l as usize)));
+                block.factor.solve_in_place(&mut x);
                 (0..m).map(|i| x[(i, 0)]).collect()
             })
             .collect();

@@ -418,7 +418,13 @@ pub fn polycube_frames(
     for (f, &(t, _)) in topo.boundary.iter().enumerate() {
         l.push(t as usize, t as usize, weights[f]);
     }
-    let lf = CholeskyFactor::new(&mut l).map_err(PolycubeError::Solve)?;
+    let centroids: Vec<[f64; 3]> = (0..nt)
+        .map(|t| {
+            let c = mesh.corners(t);
+            [0, 1, 2].map(|k| (c[0][k] + c[1][k] + c[2][k] + c[3][k]) / 4.0)
+        })
+        .collect();
+    let lf = CholeskyFactor::with_points(&mut l, &centroids).map_err(PolycubeError::Solve)?;
 
     let mut y = mesh.verts.clone();
     let (start, _, _) = deviation(mesh, topo, &y);
