@@ -43,8 +43,17 @@
 //! up: charts of fewer than three triangles join the label they share most edges with, a
 //! triangle two of whose three neighbours share another label takes it (a tooth on a chart's
 //! border), and a triangle whose three vertices all lie on charts of one other axis (it would
-//! be flattened onto the line where two planes meet) takes that label once. The
-//! parameterisation puts each triangle on an integer plane of its label's axis.
+//! be flattened onto the line where two planes meet) takes that label once.
+//!
+//! A border between two charts must be a polycube edge: convex or concave along its whole
+//! length. Where it is convex along part of it and concave along the rest (each side judged
+//! behind or in front of the other's plane), one chart runs as a tongue between two levels of
+//! the other: a step in a plane that fades out, which no polycube has (the parameterisation
+//! would squeeze it flat and invert its tetrahedra). The fandisk's deformation leaves one,
+//! a −z strip between two +y levels a hex edge apart. The tongue (the chart whose two border
+//! runs lie apart along the other's axis) takes the other chart's label between the runs,
+//! and the clean-up runs again. The parameterisation puts each triangle on an integer plane
+//! of its label's axis.
 //!
 //! # Frames
 //!
@@ -157,12 +166,37 @@ fn nearest_rotation(m: &Matrix3<f64>) -> Matrix3<f64> {
 /// a reflection stays): a target never asks a tetrahedron that is already squeezed to
 /// shrink further, so the deformation does not stall on one nearly flat tetrahedron.
 fn clamp_stretch(m: &Matrix3<f64>, lo: f64) -> Matrix3<f64> {
+    // Most gradients are within the bounds: the eigenvalues of mᵀm (the squared stretches,
+    // in closed form) say so without a singular value decomposition.
+    let (min, max) = sym_eigen_range(&(m.transpose() * m));
+    if min >= lo * lo && max <= 1.0 / (lo * lo) {
+        return *m;
+    }
     let svd = m.svd(true, true);
     let (Some(u), Some(v_t)) = (svd.u, svd.v_t) else {
         return *m;
     };
     let s = svd.singular_values.map(|x| x.clamp(lo, 1.0 / lo));
     u * Matrix3::from_diagonal(&s) * v_t
+}
+
+/// The smallest and largest eigenvalue of the symmetric `a`, in closed form (the
+/// trigonometric solution of the characteristic cubic, Smith 1961).
+fn sym_eigen_range(a: &Matrix3<f64>) -> (f64, f64) {
+    let off = a[(0, 1)].powi(2) + a[(0, 2)].powi(2) + a[(1, 2)].powi(2);
+    if off == 0.0 {
+        let d = [a[(0, 0)], a[(1, 1)], a[(2, 2)]];
+        return (d[0].min(d[1]).min(d[2]), d[0].max(d[1]).max(d[2]));
+    }
+    let q = a.trace() / 3.0;
+    let p2 =
+        (a[(0, 0)] - q).powi(2) + (a[(1, 1)] - q).powi(2) + (a[(2, 2)] - q).powi(2) + 2.0 * off;
+    let p = (p2 / 6.0).sqrt();
+    let b = (a - Matrix3::identity() * q) / p;
+    let phi = (b.determinant() / 2.0).clamp(-1.0, 1.0).acos() / 3.0;
+    let largest = q + 2.0 * p * phi.cos();
+    let smallest = q + 2.0 * p * (phi + 2.0 * std::f64::consts::PI / 3.0).cos();
+    (smallest, largest)
 }
 
 /// Smallest stretch a deformation target keeps ([`clamp_stretch`]).
@@ -183,9 +217,15 @@ fn label(n: &Vector3<f64>) -> (usize, Vector3<f64>) {
     let k = (0..3)
         .max_by(|&a, &b| n[a].abs().total_cmp(&n[b].abs()))
         .expect("three axes");
+    let l = 2 * k + usize::from(n[k] < 0.0);
+    (l, axis(l as u8))
+}
+
+/// The unit vector of signed axis `l` (0..6: +x −x +y −y +z −z).
+fn axis(l: u8) -> Vector3<f64> {
     let mut a = Vector3::zeros();
-    a[k] = n[k].signum();
-    (2 * k + usize::from(n[k] < 0.0), a)
+    a[usize::from(l / 2)] = if l.is_multiple_of(2) { 1.0 } else { -1.0 };
+    a
 }
 
 /// Deformation state: positions and per-tetrahedron gradients.
@@ -239,6 +279,38 @@ const CLEANUP_PASSES: usize = 50;
 /// Triangles a chart needs to stay a chart of its own.
 const MIN_CHART: usize = 3;
 
+/// An edge two triangles share, and the two triangles.
+type SharedEdge = ([u32; 2], u32, u32);
+
+/// The triangles across each triangle's edges, and the edges two triangles share (the edge,
+/// the two triangles); an edge of one triangle only (an open patch) has no neighbour.
+fn triangle_graph(tris: &[[u32; 3]]) -> (Vec<Vec<u32>>, Vec<SharedEdge>) {
+    let mut edges: Vec<([u32; 2], u32)> = Vec::with_capacity(3 * tris.len());
+    for (k, t) in tris.iter().enumerate() {
+        for e in 0..3 {
+            let (a, b) = (t[e], t[(e + 1) % 3]);
+            edges.push(([a.min(b), a.max(b)], k as u32));
+        }
+    }
+    edges.sort_unstable();
+    let mut adj: Vec<Vec<u32>> = vec![Vec::new(); tris.len()];
+    let mut shared = Vec::with_capacity(edges.len() / 2);
+    let mut i = 0;
+    while i < edges.len() {
+        match edges.get(i + 1) {
+            Some(&(e, b)) if e == edges[i].0 => {
+                let a = edges[i].1;
+                adj[a as usize].push(b);
+                adj[b as usize].push(a);
+                shared.push((e, a, b));
+                i += 2;
+            }
+            _ => i += 1,
+        }
+    }
+    (adj, shared)
+}
+
 /// The boundary faces' labels (`2 axis + [negative]`) from the deformed normals, cleaned up
 /// (module docs): charts of fewer than [`MIN_CHART`] triangles take the label they share
 /// the most edges with, and a triangle whose three vertices all lie on charts of another axis
@@ -249,25 +321,208 @@ fn clean_labels(mesh: &TetMesh, topo: &Topology, y: &[[f64; 3]]) -> Vec<u8> {
     let mut lab: Vec<u8> = (0..nf)
         .map(|k| label(&boundary_face(mesh, topo, y, k).0).0 as u8)
         .collect();
-    // Triangles across each triangle's edges.
-    let mut edges: Vec<([u32; 2], u32)> = Vec::with_capacity(3 * nf);
-    for (k, t) in tris.iter().enumerate() {
-        for e in 0..3 {
-            let (a, b) = (t[e], t[(e + 1) % 3]);
-            edges.push(([a.min(b), a.max(b)], k as u32));
-        }
-    }
-    edges.sort_unstable();
-    let mut adj: Vec<Vec<u32>> = vec![Vec::new(); nf];
-    for w in edges.chunks(2) {
-        if let [(ea, a), (eb, b)] = w
-            && ea == eb
-        {
-            adj[*a as usize].push(*b);
-            adj[*b as usize].push(*a);
-        }
-    }
+    let (adj, shared) = triangle_graph(&tris);
     let mut relabelled = vec![false; nf];
+    clean_up(&tris, &adj, &mut lab, &mut relabelled, mesh.verts.len());
+    for _ in 0..4 {
+        let mut turned = false;
+        for _ in 0..TURN_PASSES {
+            if !remove_turns(&tris, &adj, &shared, &mut lab, y) {
+                break;
+            }
+            turned = true;
+        }
+        if !turned {
+            break;
+        }
+        clean_up(&tris, &adj, &mut lab, &mut relabelled, mesh.verts.len());
+    }
+    lab
+}
+
+/// Passes that remove turning borders before the labels are taken as they are.
+const TURN_PASSES: usize = 24;
+
+/// The charts (connected runs of one label across edges) of the labelled triangles.
+fn charts(adj: &[Vec<u32>], lab: &[u8]) -> Vec<u32> {
+    let mut chart = vec![u32::MAX; lab.len()];
+    let mut stack = Vec::new();
+    for s in 0..lab.len() {
+        if chart[s] != u32::MAX {
+            continue;
+        }
+        chart[s] = s as u32;
+        stack.push(s as u32);
+        while let Some(f) = stack.pop() {
+            for &g in &adj[f as usize] {
+                if chart[g as usize] == u32::MAX && lab[g as usize] == lab[s] {
+                    chart[g as usize] = s as u32;
+                    stack.push(g);
+                }
+            }
+        }
+    }
+    chart
+}
+
+/// A border between two charts that is convex along part of its length and concave along
+/// the rest turns. Where one chart runs as a tongue between two levels of the other (a step
+/// in a plane that fades out), no polycube has it: the parameterisation squeezes the tongue
+/// flat and its tetrahedra invert. The tongue is the chart whose two border runs with the
+/// other lie apart along the other's axis `a`; its triangles next to the shorter (minority)
+/// run, and those reached from them within the tongue (between the runs' levels along `a`,
+/// widened by half their distance, and within the minority run's extent along the border's
+/// own axis), take the other chart's
+/// label at once, when they are at most half their chart. Returns whether a label changed.
+fn remove_turns(
+    tris: &[[u32; 3]],
+    adj: &[Vec<u32>],
+    shared: &[SharedEdge],
+    lab: &mut [u8],
+    y: &[[f64; 3]],
+) -> bool {
+    let chart = charts(adj, lab);
+    let p = |v: u32| Vector3::from(y[v as usize]);
+    let centre = |k: u32| tris[k as usize].iter().map(|&v| p(v)).sum::<Vector3<f64>>() / 3.0;
+    // Per border (chart pair, lower id first), per kind (0 convex, 1 concave): the edges, as
+    // (triangle on the lower chart, triangle on the higher, midpoint).
+    type Run = Vec<(u32, u32, Vector3<f64>, [u32; 2])>;
+    let mut borders: std::collections::BTreeMap<(u32, u32), [Run; 2]> =
+        std::collections::BTreeMap::new();
+    for &(e, f, g) in shared {
+        let (f, g) = if chart[f as usize] <= chart[g as usize] {
+            (f, g)
+        } else {
+            (g, f)
+        };
+        if chart[f as usize] == chart[g as usize] || lab[f as usize] / 2 == lab[g as usize] / 2 {
+            continue;
+        }
+        // Convex where each side lies behind the other's plane (the planes of the labels,
+        // not of the triangles).
+        let mid = (p(e[0]) + p(e[1])) / 2.0;
+        let kind = usize::from(
+            (centre(g) - mid).dot(&axis(lab[f as usize]))
+                + (centre(f) - mid).dot(&axis(lab[g as usize]))
+                >= 0.0,
+        );
+        borders
+            .entry((chart[f as usize], chart[g as usize]))
+            .or_default()[kind]
+            .push((f, g, mid, e));
+    }
+    let mut size = vec![0usize; lab.len()];
+    for &c in &chart {
+        size[c as usize] += 1;
+    }
+    let mut changed = false;
+    for runs in borders.values() {
+        if runs[0].is_empty() || runs[1].is_empty() {
+            continue;
+        }
+        let minority = usize::from(runs[1].len() < runs[0].len());
+        // How far the minority run lies from the majority run next to it, per axis: each
+        // minority edge against its nearest majority edge (a long run's mean would mix in
+        // levels far away).
+        let near: Vec<Vector3<f64>> = runs[minority]
+            .iter()
+            .map(|x| {
+                runs[1 - minority]
+                    .iter()
+                    .map(|m| m.2)
+                    .min_by(|p, q| {
+                        (p - x.2)
+                            .norm_squared()
+                            .total_cmp(&(q - x.2).norm_squared())
+                    })
+                    .expect("a border run is not empty")
+            })
+            .collect();
+        let mean = |v: &mut dyn Iterator<Item = Vector3<f64>>| {
+            let (sum, n) = v.fold((Vector3::zeros(), 0usize), |(s, n), p| (s + p, n + 1));
+            sum / n.max(1) as f64
+        };
+        let level_min = mean(&mut runs[minority].iter().map(|x| x.2));
+        let level_maj = mean(&mut near.iter().copied());
+        let apart = mean(
+            &mut runs[minority]
+                .iter()
+                .zip(&near)
+                .map(|(x, m)| (x.2 - m).abs()),
+        );
+        let (f0, g0, _, _) = runs[minority][0];
+        let (af, ag) = (
+            usize::from(lab[f0 as usize] / 2),
+            usize::from(lab[g0 as usize] / 2),
+        );
+        // The tongue is the chart whose runs lie apart along the other chart's axis.
+        let (tongue_side, a) = if apart[af] >= apart[ag] {
+            (1, af)
+        } else {
+            (0, ag)
+        };
+        let other_side =
+            |x: &(u32, u32, Vector3<f64>, [u32; 2])| if tongue_side == 1 { x.0 } else { x.1 };
+        let along = 3 - af - ag;
+        let margin = apart[a] / 2.0;
+        let (lo_a, hi_a) = (
+            level_min[a].min(level_maj[a]) - margin,
+            level_min[a].max(level_maj[a]) + margin,
+        );
+        let (lo_e, hi_e) = runs[minority]
+            .iter()
+            .flat_map(|x| x.3)
+            .fold((f64::MAX, f64::MIN), |(lo, hi), v| {
+                (lo.min(p(v)[along]), hi.max(p(v)[along]))
+            });
+        let tongue_of =
+            |x: &(u32, u32, Vector3<f64>, [u32; 2])| if tongue_side == 1 { x.1 } else { x.0 };
+        let tongue_chart = chart[tongue_of(&runs[minority][0]) as usize];
+        let label = lab[other_side(&runs[minority][0]) as usize];
+        let inside = |k: u32| {
+            let c = centre(k);
+            chart[k as usize] == tongue_chart
+                && (lo_a..=hi_a).contains(&c[a])
+                && (lo_e..=hi_e).contains(&c[along])
+        };
+        let mut seen = std::collections::BTreeSet::new();
+        let mut stack: Vec<u32> = runs[minority]
+            .iter()
+            .map(tongue_of)
+            .filter(|&k| inside(k))
+            .collect();
+        while let Some(k) = stack.pop() {
+            if !seen.insert(k) {
+                continue;
+            }
+            stack.extend(
+                adj[k as usize]
+                    .iter()
+                    .copied()
+                    .filter(|&g| !seen.contains(&g) && inside(g)),
+            );
+        }
+        if seen.is_empty() || 2 * seen.len() > size[tongue_chart as usize] {
+            continue;
+        }
+        for k in seen {
+            lab[k as usize] = label;
+        }
+        changed = true;
+    }
+    changed
+}
+
+/// The label clean-up passes of [`clean_labels`] (module docs): small charts, teeth and
+/// triangles pinched between two planes.
+fn clean_up(
+    tris: &[[u32; 3]],
+    adj: &[Vec<u32>],
+    lab: &mut [u8],
+    relabelled: &mut [bool],
+    nv: usize,
+) {
+    let nf = lab.len();
     for _ in 0..CLEANUP_PASSES {
         let mut changed = false;
         // Small charts.
@@ -320,7 +575,7 @@ fn clean_labels(mesh: &TetMesh, topo: &Topology, y: &[[f64; 3]]) -> Vec<u8> {
             }
         }
         // Triangles on a line between two planes.
-        let mut on = vec![0u8; mesh.verts.len()];
+        let mut on = vec![0u8; nv];
         for (k, t) in tris.iter().enumerate() {
             for &v in t {
                 on[v as usize] |= 1 << lab[k];
@@ -345,7 +600,6 @@ fn clean_labels(mesh: &TetMesh, topo: &Topology, y: &[[f64; 3]]) -> Vec<u8> {
             break;
         }
     }
-    lab
 }
 
 /// Polycube frames for the checked mesh (module docs), with the deformed positions.
@@ -393,7 +647,6 @@ pub fn polycube_frames(
             mean,
         ))
     };
-    let (mut kf, mut mean) = factor_k(&stiffness)?;
 
     // L: graph Laplacian of the tetrahedra plus the boundary weights.
     let areas: Vec<f64> = (0..topo.boundary.len())
@@ -424,7 +677,12 @@ pub fn polycube_frames(
             [0, 1, 2].map(|k| (c[0][k] + c[1][k] + c[2][k] + c[3][k]) / 4.0)
         })
         .collect();
-    let lf = CholeskyFactor::with_points(&mut l, &centroids).map_err(PolycubeError::Solve)?;
+    // The two factorisations are independent: side by side.
+    let (kf, lf) = rayon::join(
+        || factor_k(&stiffness),
+        || CholeskyFactor::with_points(&mut l, &centroids).map_err(PolycubeError::Solve),
+    );
+    let ((mut kf, mut mean), lf) = (kf?, lf?);
 
     let mut y = mesh.verts.clone();
     let (start, _, _) = deviation(mesh, topo, &y);
@@ -580,6 +838,97 @@ mod tests {
             *p = [q[0], q[1], q[2]];
         }
         m
+    }
+
+    #[test]
+    fn a_tongue_between_two_levels_of_a_plane_is_relabelled() {
+        // A strip of columns x = i: a +y wall (y = 0, z 0..1), a −z step (z = 1, y 0..h),
+        // and a +y wall above (y = h, z 1..2). The step's height h fades from 1 to 0 over
+        // x 4..8, so past x = 8 the two +y walls are one plane; left of x = 0 the upper
+        // wall is −z too, joining the step into a larger −z chart. The step between x = 0 and
+        // x = 8 is a tongue: its border with the +y chart is concave below and convex above.
+        let h = |i: i32| (1.0 - (f64::from(i) - 4.0).max(0.0) / 4.0).max(0.0);
+        let (cols, rows) = (-6..=12, 7u32);
+        let mut y = Vec::new();
+        for i in cols.clone() {
+            for j in 0..rows {
+                let x = f64::from(i);
+                let jf = f64::from(j);
+                y.push(match j {
+                    0..=2 => [x, 0.0, 0.5 * jf],
+                    3 | 4 => [x, h(i) * (jf - 2.0) / 2.0, 1.0],
+                    _ => [x, h(i), 1.0 + 0.5 * (jf - 4.0)],
+                });
+            }
+        }
+        let v = |i: i32, j: u32| ((i + 6) as u32) * rows + j;
+        let (mut tris, mut lab) = (Vec::new(), Vec::new());
+        for i in -6..12 {
+            for j in 0..rows - 1 {
+                let l = match j {
+                    0 | 1 => 2,
+                    2 | 3 if i < 8 => 5,
+                    2 | 3 => 2,
+                    _ if i < 0 => 5,
+                    _ => 2,
+                };
+                tris.push([v(i, j), v(i + 1, j), v(i + 1, j + 1)]);
+                tris.push([v(i, j), v(i + 1, j + 1), v(i, j + 1)]);
+                lab.extend([l, l]);
+            }
+        }
+        let (adj, shared) = triangle_graph(&tris);
+        let before = lab.clone();
+        assert!(remove_turns(&tris, &adj, &shared, &mut lab, &y));
+        for (k, t) in tris.iter().enumerate() {
+            let x = t.iter().map(|&p| y[p as usize][0]).sum::<f64>() / 3.0;
+            let step = before[k] == 5 && (2..4).contains(&(t[0] % rows));
+            // The tongue is +y now; the rest of the −z chart, and everything else, is kept.
+            let want = if step && x > 0.0 { 2 } else { before[k] };
+            assert_eq!(lab[k], want, "triangle {k} at x {x}");
+        }
+        // No border turns any more.
+        assert!(!remove_turns(&tris, &adj, &shared, &mut lab, &y));
+    }
+
+    #[test]
+    fn the_closed_form_stretch_range_matches_the_singular_values() {
+        // Deterministic pseudo-random gradients, some stretched past the bounds, and the
+        // diagonal and repeated-eigenvalue cases the closed form treats apart.
+        let mut seed = 7u64;
+        let mut next = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+        };
+        let mut cases: Vec<Matrix3<f64>> = (0..200)
+            .map(|k| Matrix3::from_fn(|_, _| next()) * (0.3 + k as f64 / 40.0))
+            .collect();
+        cases.push(Matrix3::from_diagonal(&Vector3::new(0.4, 1.0, 3.0)));
+        cases.push(Matrix3::identity() * 2.0);
+        cases.push(Rotation3::new(Vector3::new(0.3, 0.1, -0.2)).into_inner());
+        for m in cases {
+            let sv = m.singular_values();
+            let (lo, hi) = sym_eigen_range(&(m.transpose() * m));
+            let (smin, smax) = (sv.min(), sv.max());
+            assert!(
+                (lo - smin * smin).abs() < 1e-9 * (1.0 + smax * smax),
+                "{m} {lo} {smin}"
+            );
+            assert!(
+                (hi - smax * smax).abs() < 1e-9 * (1.0 + smax * smax),
+                "{m} {hi} {smax}"
+            );
+            // Within the bounds the clamp returns the gradient itself.
+            let c = clamp_stretch(&m, STRETCH);
+            if smin >= STRETCH && smax <= 1.0 / STRETCH {
+                assert_eq!(c, m);
+            } else {
+                let cs = c.singular_values();
+                assert!(cs.min() >= STRETCH - 1e-12 && cs.max() <= 1.0 / STRETCH + 1e-12);
+            }
+        }
     }
 
     #[test]
