@@ -32,7 +32,13 @@
 //!
 //! until the area-weighted mean angle between the boundary normals and their axes falls below
 //! the tolerance, stops falling for ten iterations, or no step keeps every tetrahedron
-//! positive. Smoothing the rotations (step 2) instead of the positions is what makes the
+//! positive. Then a second phase (Gregson et al. fix the labels the same way before their
+//! final solve): the labels are cleaned up (below) and, unless the boundary is already within
+//! the tolerance of them, the iteration goes on with each triangle's target axis its cleaned-up
+//! label instead of its nearest axis, up to [`PolycubeParams::label_iterations`] more times.
+//! A relabelled tongue, a tooth or a pinched triangle is then turned onto its chart's plane
+//! by the deformation rather than by the parameterisation (the fandisk: 84 tetrahedra of the
+//! parameterisation inverted before rounding after the first phase, 17 after the second). Smoothing the rotations (step 2) instead of the positions is what makes the
 //! boundary charts grow flat and the transitions between labels sharpen into the polycube's
 //! edges over the iterations. (Gregson et al. smooth rotations of the surface normals the
 //! same way; the clamped stretch and the step control are ours.)
@@ -88,6 +94,8 @@ pub struct PolycubeParams {
     pub tolerance_degrees: f64,
     /// Weight `λ` of the boundary targets against the smoothness of the rotations.
     pub boundary_weight: f64,
+    /// Most iterations of the second phase, towards the cleaned-up labels (module docs).
+    pub label_iterations: usize,
 }
 
 impl Default for PolycubeParams {
@@ -96,6 +104,7 @@ impl Default for PolycubeParams {
             iterations: 200,
             tolerance_degrees: 1.0,
             boundary_weight: 1.0,
+            label_iterations: 150,
         }
     }
 }
@@ -106,7 +115,7 @@ pub struct PolycubeReport {
     /// Deformation iterations run.
     pub iterations: usize,
     /// Area-weighted mean angle (degrees) between deformed boundary normals and their axes, at
-    /// the start and at the end.
+    /// the start (nearest axes) and at the end (the cleaned-up labels' axes).
     pub mean_deviation_start: f64,
     /// As `mean_deviation_start`, at the end.
     pub mean_deviation: f64,
@@ -118,6 +127,9 @@ pub struct PolycubeReport {
     pub flipped: usize,
     /// Times blocking tetrahedra were stiffened and the positions solved again.
     pub stiffened: usize,
+    /// Iterations run before the second phase (towards the cleaned-up labels) began; all of
+    /// them when there was none.
+    pub second_phase_from: usize,
 }
 
 /// The deformation and the frames read off it.
@@ -255,12 +267,20 @@ fn boundary_face(mesh: &TetMesh, topo: &Topology, y: &[[f64; 3]], k: usize) -> (
 
 /// Area-weighted mean deviation (degrees) of the boundary normals at `y` from their axes, the
 /// fraction of area within 5°, and the labels.
-fn deviation(mesh: &TetMesh, topo: &Topology, y: &[[f64; 3]]) -> (f64, f64, [usize; 6]) {
+fn deviation(
+    mesh: &TetMesh,
+    topo: &Topology,
+    y: &[[f64; 3]],
+    fixed: Option<&[u8]>,
+) -> (f64, f64, [usize; 6]) {
     let (mut sum, mut within, mut area) = (0.0, 0.0, 0.0);
     let mut labels = [0; 6];
     for k in 0..topo.boundary.len() {
         let (n, a) = boundary_face(mesh, topo, y, k);
-        let (l, axis) = label(&n);
+        let (l, axis) = match fixed {
+            Some(f) => (usize::from(f[k]), axis(f[k])),
+            None => label(&n),
+        };
         labels[l] += 1;
         let angle = n.dot(&axis).clamp(-1.0, 1.0).acos().to_degrees();
         sum += a * angle;
@@ -685,7 +705,7 @@ pub fn polycube_frames(
     let ((mut kf, mut mean), lf) = (kf?, lf?);
 
     let mut y = mesh.verts.clone();
-    let (start, _, _) = deviation(mesh, topo, &y);
+    let (start, _, _) = deviation(mesh, topo, &y, None);
     let mut report = PolycubeReport {
         mean_deviation_start: start,
         mean_deviation: start,
@@ -693,109 +713,135 @@ pub fn polycube_frames(
     };
     let mut best = (start, y.clone());
     let mut stale = 0;
-    while report.iterations < params.iterations && report.mean_deviation > params.tolerance_degrees
-    {
-        // 1–2: boundary targets, spread over the tetrahedra.
-        let mut rhs = vec![[0.0; 3]; nt];
-        for (f, &(t, _)) in topo.boundary.iter().enumerate() {
-            let (n, _) = boundary_face(mesh, topo, &y, f);
-            let (_, a) = label(&n);
-            let axis = n.cross(&a);
-            let s = axis.norm();
-            if s > 1e-12 {
-                let rho = axis * (s.atan2(n.dot(&a)) / s);
-                for d in 0..3 {
-                    rhs[t as usize][d] += weights[f] * rho[d];
-                }
-            }
-        }
-        let r: Vec<Vector3<f64>> = lf.solve(&rhs).into_iter().map(Vector3::from).collect();
-        // 3: rigid targets, solved for positions. A tetrahedron that blocks every step
-        // (it would turn inside out) is stiffened and the positions solved again.
-        let targets: Vec<Matrix3<f64>> = (0..nt)
-            .into_par_iter()
-            .map(|t| {
-                let turn = Rotation3::new(r[t]).into_inner();
-                turn * clamp_stretch(&def.jacobian(&y, t), STRETCH)
-            })
-            .collect();
-        let flipped_now: Vec<bool> = (0..nt)
-            .into_par_iter()
-            .map(|t| def.jacobian(&y, t).determinant() <= 0.0)
-            .collect();
-        let mut next = None;
-        for _ in 0..=STIFFEN_ROUNDS {
-            let pulls: Vec<[Vector3<f64>; 4]> = (0..nt)
-                .into_par_iter()
-                .map(|t| def.grads[t].map(|g| targets[t] * g * (stiffness[t] * volumes[t])))
-                .collect();
-            let mut b = vec![[0.0; 3]; nv];
-            for (tet, pull) in mesh.tets.iter().zip(&pulls) {
-                for (&v, qg) in tet.iter().zip(pull) {
+    let mut fixed: Option<Vec<u8>> = None;
+    report.second_phase_from = usize::MAX;
+    let mut limit = params.iterations;
+    // First towards the nearest axes, then (second phase) towards the cleaned-up labels.
+    loop {
+        while report.iterations < limit && report.mean_deviation > params.tolerance_degrees {
+            // 1–2: boundary targets, spread over the tetrahedra.
+            let mut rhs = vec![[0.0; 3]; nt];
+            for (f, &(t, _)) in topo.boundary.iter().enumerate() {
+                let (n, _) = boundary_face(mesh, topo, &y, f);
+                let a = match &fixed {
+                    Some(l) => axis(l[f]),
+                    None => label(&n).1,
+                };
+                let axis = n.cross(&a);
+                let s = axis.norm();
+                if s > 1e-12 {
+                    let rho = axis * (s.atan2(n.dot(&a)) / s);
                     for d in 0..3 {
-                        b[v as usize][d] += qg[d];
+                        rhs[t as usize][d] += weights[f] * rho[d];
                     }
                 }
             }
-            for d in 0..3 {
-                b[pinned][d] += mean * y[pinned][d];
-            }
-            let target = kf.solve(&b);
-            // Step towards the solve's positions, halving the step while a tetrahedron would
-            // turn inside out (a tetrahedron already flipped does not count).
-            let mut step = 1.0;
-            let blocking = loop {
-                let cand: Vec<[f64; 3]> = y
-                    .par_iter()
-                    .zip(&target)
-                    .map(|(a, b)| std::array::from_fn(|d| a[d] + step * (b[d] - a[d])))
-                    .collect();
-                let bad: Vec<usize> = (0..nt)
+            let r: Vec<Vector3<f64>> = lf.solve(&rhs).into_iter().map(Vector3::from).collect();
+            // 3: rigid targets, solved for positions. A tetrahedron that blocks every step
+            // (it would turn inside out) is stiffened and the positions solved again.
+            let targets: Vec<Matrix3<f64>> = (0..nt)
+                .into_par_iter()
+                .map(|t| {
+                    let turn = Rotation3::new(r[t]).into_inner();
+                    turn * clamp_stretch(&def.jacobian(&y, t), STRETCH)
+                })
+                .collect();
+            let flipped_now: Vec<bool> = (0..nt)
+                .into_par_iter()
+                .map(|t| def.jacobian(&y, t).determinant() <= 0.0)
+                .collect();
+            let mut next = None;
+            for _ in 0..=STIFFEN_ROUNDS {
+                let pulls: Vec<[Vector3<f64>; 4]> = (0..nt)
                     .into_par_iter()
-                    .filter(|&t| !flipped_now[t] && def.jacobian(&cand, t).determinant() <= 0.0)
+                    .map(|t| def.grads[t].map(|g| targets[t] * g * (stiffness[t] * volumes[t])))
                     .collect();
-                if bad.is_empty() {
-                    next = Some(cand);
-                    break bad;
-                }
-                if step <= MIN_STEP {
-                    break bad;
-                }
-                step *= 0.5;
-            };
-            if next.is_some() {
-                break;
-            }
-            for t in blocking {
-                stiffness[t] *= STIFFEN;
-                for &s in &topo.neighbours[t] {
-                    if s != NO_TET {
-                        stiffness[s as usize] *= STIFFEN.sqrt();
+                let mut b = vec![[0.0; 3]; nv];
+                for (tet, pull) in mesh.tets.iter().zip(&pulls) {
+                    for (&v, qg) in tet.iter().zip(pull) {
+                        for d in 0..3 {
+                            b[v as usize][d] += qg[d];
+                        }
                     }
                 }
+                for d in 0..3 {
+                    b[pinned][d] += mean * y[pinned][d];
+                }
+                let target = kf.solve(&b);
+                // Step towards the solve's positions, halving the step while a tetrahedron would
+                // turn inside out (a tetrahedron already flipped does not count).
+                let mut step = 1.0;
+                let blocking = loop {
+                    let cand: Vec<[f64; 3]> = y
+                        .par_iter()
+                        .zip(&target)
+                        .map(|(a, b)| std::array::from_fn(|d| a[d] + step * (b[d] - a[d])))
+                        .collect();
+                    let bad: Vec<usize> = (0..nt)
+                        .into_par_iter()
+                        .filter(|&t| !flipped_now[t] && def.jacobian(&cand, t).determinant() <= 0.0)
+                        .collect();
+                    if bad.is_empty() {
+                        next = Some(cand);
+                        break bad;
+                    }
+                    if step <= MIN_STEP {
+                        break bad;
+                    }
+                    step *= 0.5;
+                };
+                if next.is_some() {
+                    break;
+                }
+                for t in blocking {
+                    stiffness[t] *= STIFFEN;
+                    for &s in &topo.neighbours[t] {
+                        if s != NO_TET {
+                            stiffness[s as usize] *= STIFFEN.sqrt();
+                        }
+                    }
+                }
+                report.stiffened += 1;
+                (kf, mean) = factor_k(&stiffness)?;
             }
-            report.stiffened += 1;
-            (kf, mean) = factor_k(&stiffness)?;
-        }
-        let Some(next) = next else {
-            break;
-        };
-        y = next;
-        report.iterations += 1;
-        let (dev, _, _) = deviation(mesh, topo, &y);
-        report.mean_deviation = dev;
-        if dev < best.0 - 1e-3 {
-            best = (dev, y.clone());
-            stale = 0;
-        } else {
-            stale += 1;
-            if stale >= 10 {
+            let Some(next) = next else {
                 break;
+            };
+            y = next;
+            report.iterations += 1;
+            let (dev, _, _) = deviation(mesh, topo, &y, fixed.as_deref());
+            report.mean_deviation = dev;
+            if dev < best.0 - 1e-3 {
+                best = (dev, y.clone());
+                stale = 0;
+            } else {
+                stale += 1;
+                if stale >= 10 {
+                    break;
+                }
             }
         }
+        if fixed.is_some() || params.label_iterations == 0 {
+            break;
+        }
+        let l = clean_labels(mesh, topo, &best.1);
+        let (dev, _, _) = deviation(mesh, topo, &best.1, Some(&l));
+        fixed = Some(l);
+        report.mean_deviation = dev;
+        best.0 = dev;
+        if dev <= params.tolerance_degrees {
+            break;
+        }
+        y = best.1.clone();
+        stale = 0;
+        report.second_phase_from = report.iterations;
+        limit = report.iterations + params.label_iterations;
+    }
+    if report.second_phase_from == usize::MAX {
+        report.second_phase_from = report.iterations;
     }
     let y = best.1;
-    let (dev, within, _) = deviation(mesh, topo, &y);
+    let (dev, within, _) = deviation(mesh, topo, &y, fixed.as_deref());
     report.mean_deviation = dev;
     report.aligned_fraction = within;
     let rows = |r: &Matrix3<f64>| [0, 1, 2].map(|row| [r[(row, 0)], r[(row, 1)], r[(row, 2)]]);
@@ -809,7 +855,10 @@ pub fn polycube_frames(
         frames.push(rows(&nearest_rotation(&j)));
         gradients.push(rows(&j));
     }
-    let labels = clean_labels(mesh, topo, &y);
+    let labels = match fixed {
+        Some(l) => l,
+        None => clean_labels(mesh, topo, &y),
+    };
     for l in &labels {
         report.labels[*l as usize] += 1;
     }
