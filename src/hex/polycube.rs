@@ -266,22 +266,15 @@ fn boundary_face(mesh: &TetMesh, topo: &Topology, y: &[[f64; 3]], k: usize) -> (
 }
 
 /// Area-weighted mean deviation (degrees) of the boundary normals at `y` from their axes, the
-/// fraction of area within 5°, and the labels.
-fn deviation(
-    mesh: &TetMesh,
-    topo: &Topology,
-    y: &[[f64; 3]],
-    fixed: Option<&[u8]>,
-) -> (f64, f64, [usize; 6]) {
+/// fraction of area within 5° (the axes of `fixed` labels where given, else the nearest).
+fn deviation(mesh: &TetMesh, topo: &Topology, y: &[[f64; 3]], fixed: Option<&[u8]>) -> (f64, f64) {
     let (mut sum, mut within, mut area) = (0.0, 0.0, 0.0);
-    let mut labels = [0; 6];
     for k in 0..topo.boundary.len() {
         let (n, a) = boundary_face(mesh, topo, y, k);
-        let (l, axis) = match fixed {
-            Some(f) => (usize::from(f[k]), axis(f[k])),
-            None => label(&n),
+        let axis = match fixed {
+            Some(f) => axis(f[k]),
+            None => label(&n).1,
         };
-        labels[l] += 1;
         let angle = n.dot(&axis).clamp(-1.0, 1.0).acos().to_degrees();
         sum += a * angle;
         area += a;
@@ -290,7 +283,7 @@ fn deviation(
         }
     }
     let area = area.max(f64::MIN_POSITIVE);
-    (sum / area, within / area, labels)
+    (sum / area, within / area)
 }
 
 /// Passes of the label clean-up before it gives up (each pass only relabels).
@@ -545,41 +538,37 @@ fn clean_up(
     let nf = lab.len();
     for _ in 0..CLEANUP_PASSES {
         let mut changed = false;
-        // Small charts.
-        let mut chart = vec![u32::MAX; nf];
-        for s in 0..nf {
-            if chart[s] != u32::MAX {
+        // Small charts (relabelled in order of their first triangle, each seeing the labels
+        // the charts before it were given).
+        let chart = charts(adj, lab);
+        let mut size = vec![0usize; nf];
+        for &c in &chart {
+            size[c as usize] += 1;
+        }
+        let mut small: Vec<Vec<u32>> = vec![Vec::new(); nf];
+        for (k, &c) in chart.iter().enumerate() {
+            if size[c as usize] < MIN_CHART {
+                small[c as usize].push(k as u32);
+            }
+        }
+        for (s, members) in small.iter().enumerate() {
+            if members.is_empty() {
                 continue;
             }
-            let mut members = vec![s as u32];
-            chart[s] = s as u32;
-            let mut k = 0;
-            while k < members.len() {
-                let f = members[k] as usize;
-                k += 1;
-                for &g in &adj[f] {
-                    if chart[g as usize] == u32::MAX && lab[g as usize] == lab[s] {
-                        chart[g as usize] = s as u32;
-                        members.push(g);
+            let mut border = [0usize; 6];
+            for &f in members {
+                for &g in &adj[f as usize] {
+                    if lab[g as usize] != lab[s] {
+                        border[lab[g as usize] as usize] += 1;
                     }
                 }
             }
-            if members.len() < MIN_CHART {
-                let mut border = [0usize; 6];
-                for &f in &members {
-                    for &g in &adj[f as usize] {
-                        if lab[g as usize] != lab[s] {
-                            border[lab[g as usize] as usize] += 1;
-                        }
-                    }
+            let best = (0..6).max_by_key(|&l| (border[l], std::cmp::Reverse(l)));
+            if let Some(best) = best.filter(|&l| border[l] > 0) {
+                for &f in members {
+                    lab[f as usize] = best as u8;
                 }
-                let best = (0..6).max_by_key(|&l| (border[l], std::cmp::Reverse(l)));
-                if let Some(best) = best.filter(|&l| border[l] > 0) {
-                    for &f in &members {
-                        lab[f as usize] = best as u8;
-                    }
-                    changed = true;
-                }
+                changed = true;
             }
         }
         // Teeth: a triangle two of whose neighbours share another label takes it.
@@ -705,7 +694,7 @@ pub fn polycube_frames(
     let ((mut kf, mut mean), lf) = (kf?, lf?);
 
     let mut y = mesh.verts.clone();
-    let (start, _, _) = deviation(mesh, topo, &y, None);
+    let (start, _) = deviation(mesh, topo, &y, None);
     let mut report = PolycubeReport {
         mean_deviation_start: start,
         mean_deviation: start,
@@ -809,7 +798,7 @@ pub fn polycube_frames(
             };
             y = next;
             report.iterations += 1;
-            let (dev, _, _) = deviation(mesh, topo, &y, fixed.as_deref());
+            let (dev, _) = deviation(mesh, topo, &y, fixed.as_deref());
             report.mean_deviation = dev;
             if dev < best.0 - 1e-3 {
                 best = (dev, y.clone());
@@ -825,7 +814,7 @@ pub fn polycube_frames(
             break;
         }
         let l = clean_labels(mesh, topo, &best.1);
-        let (dev, _, _) = deviation(mesh, topo, &best.1, Some(&l));
+        let (dev, _) = deviation(mesh, topo, &best.1, Some(&l));
         fixed = Some(l);
         report.mean_deviation = dev;
         best.0 = dev;
@@ -841,7 +830,7 @@ pub fn polycube_frames(
         report.second_phase_from = report.iterations;
     }
     let y = best.1;
-    let (dev, within, _) = deviation(mesh, topo, &y, fixed.as_deref());
+    let (dev, within) = deviation(mesh, topo, &y, fixed.as_deref());
     report.mean_deviation = dev;
     report.aligned_fraction = within;
     let rows = |r: &Matrix3<f64>| [0, 1, 2].map(|row| [r[(row, 0)], r[(row, 1)], r[(row, 2)]]);
