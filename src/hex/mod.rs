@@ -21,6 +21,7 @@
 //! * [`extract`]: hexahedra from an integer-grid map by walks from cube centres to corners.
 //! * [`pillow`]: a layer of hexahedra along the boundary (for polycube corners).
 //! * [`relax`]: relaxation of the extracted mesh towards ideal cubes, boundary on the surface.
+//! * [`untangle`]: inverted tetrahedra of a rounded map turned back (foldover-free maps).
 
 pub mod extract;
 pub mod frames;
@@ -34,6 +35,7 @@ pub mod rotation;
 pub mod smooth_frames;
 pub mod stuffing;
 pub mod topology;
+pub mod untangle;
 pub mod winding;
 
 pub use mesh::{Frame, HexMesh, TetMesh};

@@ -64,6 +64,17 @@
 //! than are flipped already, the integer on the other side is taken if it flips fewer
 //! ([`ParamReport::redirected`]). The report names the first round after which more
 //! tetrahedra were flipped, and what it fixed.
+//!
+//! # Untangling
+//!
+//! The least-squares energy does not forbid inversion: where the rounded planes squeeze a
+//! region, a few tetrahedra come out flipped although an injective map with the same
+//! integers exists. With every integer fixed, the map is an affine function of the
+//! remaining continuous unknowns (the elimination's expressions), and
+//! [`super::untangle`] moves those near the flipped tetrahedra to minimise the
+//! foldover-free energy of Garanzha et al. (2021) against each tetrahedron's target
+//! gradients, so the constraints hold exactly and the rest of the map stays
+//! ([`ParamParams::untangle`], [`ParamReport::untangle`]).
 
 use super::rotation::Rot;
 
@@ -147,6 +158,9 @@ pub struct ParamParams {
     /// Most open integer unknowns rounded one at a time on one factorisation (module docs);
     /// each keeps a solved column in memory. `0`: every round refactors.
     pub one_at_a_time: usize,
+    /// After rounding, turn back the tetrahedra it left inverted by moving the continuous
+    /// unknowns near them ([`super::untangle`]); the integers and constraints stay.
+    pub untangle: bool,
 }
 
 impl Default for ParamParams {
@@ -156,6 +170,7 @@ impl Default for ParamParams {
             round: true,
             batch: 0.25,
             one_at_a_time: 128,
+            untangle: true,
         }
     }
 }
@@ -255,6 +270,9 @@ pub struct ParamReport {
     /// Integer unknowns rounded to the integer on the far side of their value, because the
     /// nearest one flipped more tetrahedra (the one-at-a-time rounding's lookahead).
     pub redirected: usize,
+    /// The untangling of the rounded map, when it left tetrahedra inverted
+    /// (`flipped_final` counts them after it).
+    pub untangle: Option<super::untangle::UntangleReport>,
 }
 
 /// Why the parameterisation failed.
@@ -843,6 +861,18 @@ pub fn parameterise_with(
                 })
                 .collect()
         };
+        // The map of the final unknowns `z`, its flips and energy recorded.
+        let finish = |z: &[f64], report: &mut ParamReport| -> Vec<f64> {
+            let values = eval(z);
+            report.flipped_final = flipped_of(&values).len();
+            report.energy_final = energy(
+                &corner_params(&corner_cv, &values),
+                &grads,
+                &targets,
+                &volumes,
+            ) / total_volume;
+            values
+        };
         let values = eval(&fac.x0);
         let flipped = flipped_of(&values);
         let e = energy(
@@ -871,8 +901,17 @@ pub fn parameterise_with(
             .filter(|&(_, &v)| elim.integer[v as usize])
             .map(|(k, _)| k as u32)
             .collect();
-        if !params.round || open.is_empty() {
+        if !params.round {
             break values;
+        }
+        if open.is_empty() {
+            if flipped.is_empty() || !params.untangle {
+                break values;
+            }
+            let mut z = fac.x0.clone();
+            let movable = vec![true; z.len()];
+            report.untangle = Some(sys.untangle(&exprs, &mut z, &movable));
+            break finish(&z, &mut report);
         }
         if open.len() <= params.one_at_a_time {
             // Greedy rounding (§3.1) one unknown at a time, closest to an integer first, on
@@ -924,15 +963,12 @@ pub fn parameterise_with(
                 mu = r.multipliers(&fixed).ok_or_else(singular)?;
                 done[k] = true;
             }
-            let values = eval(&r.solution(&fixed).ok_or_else(singular)?);
-            report.flipped_final = flipped_of(&values).len();
-            report.energy_final = energy(
-                &corner_params(&corner_cv, &values),
-                &grads,
-                &targets,
-                &volumes,
-            ) / total_volume;
-            break values;
+            let mut z = r.solution(&fixed).ok_or_else(singular)?;
+            if flips_now > 0 && params.untangle {
+                let movable: Vec<bool> = free.iter().map(|&v| !elim.integer[v as usize]).collect();
+                report.untangle = Some(sys.untangle(&exprs, &mut z, &movable));
+            }
+            break finish(&z, &mut report);
         }
         // Batched greedy rounding (§3.1), closest to an integer first, a factorisation per
         // round, until few enough are open for the one-at-a-time rounding above.
@@ -1043,6 +1079,64 @@ struct System<'a> {
 }
 
 impl System<'_> {
+    /// Untangles the map of the free unknowns `z` ([`super::untangle`]), moving those marked
+    /// `movable`; each tetrahedron is measured against its target gradients.
+    fn untangle(
+        &self,
+        exprs: &[Expr],
+        z: &mut [f64],
+        movable: &[bool],
+    ) -> super::untangle::UntangleReport {
+        use super::untangle::{Affine, Problem, UntangleParams, untangle};
+        let nt = self.volumes.len();
+        let corners: Vec<[u32; 4]> = self
+            .corner_cv
+            .chunks_exact(4)
+            .map(|c| [c[0], c[1], c[2], c[3]])
+            .collect();
+        let ncv = self.corner_cv.iter().max().map_or(0, |&m| m as usize + 1);
+        let points: Vec<[Affine; 3]> = (0..ncv)
+            .map(|cv| {
+                std::array::from_fn(|r| {
+                    let e = &exprs[3 * cv + r];
+                    Affine {
+                        terms: e
+                            .terms
+                            .iter()
+                            .map(|&(f, c)| (self.index[f as usize], c))
+                            .collect(),
+                        constant: e.constant,
+                    }
+                })
+            })
+            .collect();
+        let reference: Vec<[[f64; 3]; 4]> = (0..nt)
+            .map(|t| {
+                let tm = nalgebra::Matrix3::from_fn(|r, c| self.targets[t][r][c]);
+                let g = &self.grads[t];
+                match tm.try_inverse().filter(|_| tm.determinant() > 0.0) {
+                    // h = T⁻ᵀ g
+                    Some(inv) => std::array::from_fn(|j| {
+                        std::array::from_fn(|c| (0..3).map(|k| inv[(k, c)] * g[j][k]).sum())
+                    }),
+                    None => {
+                        let s = 1.0 / tm.norm().max(f64::MIN_POSITIVE) * 3f64.sqrt();
+                        g.map(|v| v.map(|x| x * s))
+                    }
+                }
+            })
+            .collect();
+        let mean = self.volumes.iter().sum::<f64>() / nt.max(1) as f64;
+        let weights: Vec<f64> = self.volumes.iter().map(|v| v / mean).collect();
+        let problem = Problem {
+            corners: &corners,
+            points: &points,
+            reference: &reference,
+            weights: &weights,
+        };
+        untangle(&problem, z, movable, &UntangleParams::default())
+    }
+
     /// Assembles the normal equations, splits them into independent blocks (the connected
     /// components of the matrix: with identity transitions the three parameter axes never
     /// meet) and factors each; returns the factors with the solution.

@@ -41,6 +41,15 @@
 //!    round puts back at least one vertex, so this ends). Hence the minimum scaled Jacobian
 //!    never decreases, no hexahedron that was valid inverts, and an inverted one can only
 //!    improve. Accepted vertices regain step (×1.5, up to [`RelaxParams::step`]).
+//! 5. **Untangling.** Hexahedra still inverted when the iteration ends (the step rule only
+//!    keeps them from getting worse) are untangled by their corner tetrahedra
+//!    ([`crate::hex::untangle::untangle_hexes`]): first with every boundary vertex held,
+//!    then with the surface vertices sliding in their tangent planes (the mean of their
+//!    quadrilaterals' normals) and projected back onto the surface, up to
+//!    [`UNTANGLE_ROUNDS`] rounds; a round is kept only when it leaves fewer hexahedra
+//!    inverted. Two hexahedra folded onto each other at a corner (sharing its three edges
+//!    with opposite orientations) cannot be untangled and are reported
+//!    ([`crate::hex::untangle::UntangleReport::conflicts`]).
 //!
 //! The iteration stops after [`RelaxParams::iterations`] rounds or when the largest proposed
 //! move is below [`RelaxParams::tolerance`] times the mean edge length. The update is a
@@ -49,9 +58,13 @@
 
 use crate::hex::mesh::HexMesh;
 use crate::hex::quality::{HEX_EDGES, HEX_FACES, hex_scaled_jacobian};
+use crate::hex::untangle::{Freedom, UntangleParams, UntangleReport, untangle_hexes};
 use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
 use serde::Serialize;
+
+/// Most rounds of untangling and projection onto the surface (module docs, step 5).
+pub const UNTANGLE_ROUNDS: usize = 3;
 
 /// The parameters of [`relax`].
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -125,6 +138,9 @@ pub struct RelaxReport {
     pub cube_misfit_before: f64,
     /// The same after (relative to the same initial mean edge length).
     pub cube_misfit_after: f64,
+    /// The untangling of the hexahedra the relaxation left inverted, when it did (module
+    /// docs, step 5).
+    pub untangle: Option<UntangleReport>,
 }
 
 fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
@@ -670,6 +686,58 @@ pub fn relax(
         sj = sj_next;
     }
 
+    // 5: hexahedra still inverted are untangled: first with the boundary held, then with
+    // the surface vertices sliding in their tangent planes and projected back onto the
+    // surface; a round is kept only when it leaves fewer hexahedra inverted.
+    for round in 0..UNTANGLE_ROUNDS {
+        let inverted = summary(&sj).2;
+        if inverted == 0 {
+            break;
+        }
+        let freedom: Vec<Freedom> = (0..nv)
+            .map(|v| match kind[v] {
+                Kind::Interior => Freedom::Free,
+                Kind::Fixed => Freedom::Fixed,
+                Kind::Surface if round == 0 => Freedom::Fixed,
+                Kind::Surface => {
+                    let n = normals[v].iter().fold([0.0; 3], |a, &b| add(a, b));
+                    let l = dot(n, n).sqrt();
+                    if l > 0.0 {
+                        Freedom::Plane(scale(n, 1.0 / l))
+                    } else {
+                        Freedom::Fixed
+                    }
+                }
+            })
+            .collect();
+        let before = hex.verts.clone();
+        let r = untangle_hexes(
+            &mut hex.verts,
+            &hex.hexes,
+            &freedom,
+            &UntangleParams::default(),
+        );
+        for v in 0..nv {
+            if kind[v] == Kind::Surface
+                && hex.verts[v] != before[v]
+                && let Some((q, _)) = bvh.closest(hex.verts[v])
+            {
+                hex.verts[v] = q;
+            }
+        }
+        let untangled: Vec<f64> = (0..nh)
+            .into_par_iter()
+            .map(|k| sj_of(&hex.verts, k))
+            .collect();
+        let worse = summary(&untangled).2 >= inverted;
+        report.untangle = Some(r);
+        if worse {
+            hex.verts = before;
+            break;
+        }
+        sj = untangled;
+    }
+
     let (min1, mean1, bad1) = summary(&sj);
     report.min_sj_after = min1;
     report.mean_sj_after = mean1;
@@ -687,14 +755,14 @@ pub fn relax(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::hex::extract::{extract, fixtures};
     use rand::{Rng, SeedableRng};
 
     /// The `n³` grid of cubes of side `1/n` on the unit box, vertex `(i, j, k)` at index
     /// `i + (n+1)(j + (n+1)k)`.
-    fn grid(n: usize) -> HexMesh {
+    pub(crate) fn grid(n: usize) -> HexMesh {
         let id = |i: usize, j: usize, k: usize| (i + (n + 1) * (j + (n + 1) * k)) as u32;
         let h = 1.0 / n as f64;
         let mut verts = Vec::new();

@@ -194,6 +194,10 @@ pub struct HexFailure {
     pub chords_split: usize,
     /// The parameterisation, when it ran (the rounding that flipped tetrahedra is named).
     pub param: Option<ParamReport>,
+    /// The pillowing, when it ran.
+    pub pillow: Option<PillowReport>,
+    /// The relaxation, when it ran.
+    pub relax: Option<RelaxReport>,
     /// The quality of the extracted hexahedra, when some were inverted.
     pub quality: Option<MeshQuality>,
     /// Seconds per step, as far as the run got.
@@ -370,6 +374,8 @@ fn run(job: &HexJob, ctx: &Ctx, failure: &mut HexFailure) -> Result<HexStats> {
     let per_hex = ctx.pool.install(|| hex_qualities(&hexes));
     let quality = summarise(&per_hex);
     failure.quality = Some(quality.clone());
+    failure.pillow = pillowed.clone();
+    failure.relax = relaxed.clone();
     failure.seconds = seconds;
     if quality.inverted > 0 && !job.keep_inverted {
         let worst: Vec<String> = quality
@@ -378,10 +384,21 @@ fn run(job: &HexJob, ctx: &Ctx, failure: &mut HexFailure) -> Result<HexStats> {
             .take(5)
             .map(|w| format!("{} ({:.3})", w.hex, w.scaled_jacobian))
             .collect();
+        let folded = relaxed
+            .as_ref()
+            .and_then(|r| r.untangle.as_ref())
+            .and_then(|u| u.conflicts.first())
+            .map_or(String::new(), |&[a, b]| {
+                format!(
+                    "; hexahedra {} and {} are folded onto each other at a corner (they share its three edges with opposite orientations), which no placement of the vertices undoes",
+                    a / 8,
+                    b / 8
+                )
+            });
         return Err(Error::input(
             path,
             format!(
-                "{} of {} hexahedra are inverted (scaled Jacobian ≤ 0), worst: {}; nothing written (--keep-inverted writes them anyway)",
+                "{} of {} hexahedra are inverted (scaled Jacobian ≤ 0), worst: {}{folded}; nothing written (--keep-inverted writes them anyway)",
                 quality.inverted,
                 quality.hexes,
                 worst.join(", ")
