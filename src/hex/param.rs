@@ -910,7 +910,7 @@ pub fn parameterise_with(
             }
             let mut z = fac.x0.clone();
             let movable = vec![true; z.len()];
-            report.untangle = Some(sys.untangle(&exprs, &mut z, &movable));
+            report.untangle = Some(sys.untangle(&exprs, ncv as usize, &mut z, &movable));
             break finish(&z, &mut report);
         }
         if open.len() <= params.one_at_a_time {
@@ -966,7 +966,7 @@ pub fn parameterise_with(
             let mut z = r.solution(&fixed).ok_or_else(singular)?;
             if flips_now > 0 && params.untangle {
                 let movable: Vec<bool> = free.iter().map(|&v| !elim.integer[v as usize]).collect();
-                report.untangle = Some(sys.untangle(&exprs, &mut z, &movable));
+                report.untangle = Some(sys.untangle(&exprs, ncv as usize, &mut z, &movable));
             }
             break finish(&z, &mut report);
         }
@@ -1080,10 +1080,11 @@ struct System<'a> {
 
 impl System<'_> {
     /// Untangles the map of the free unknowns `z` ([`super::untangle`]), moving those marked
-    /// `movable`; each tetrahedron is measured against its target gradients.
+    /// `movable`; `ncv` cut vertices, each tetrahedron measured against its target gradients.
     fn untangle(
         &self,
         exprs: &[Expr],
+        ncv: usize,
         z: &mut [f64],
         movable: &[bool],
     ) -> super::untangle::UntangleReport {
@@ -1094,7 +1095,6 @@ impl System<'_> {
             .chunks_exact(4)
             .map(|c| [c[0], c[1], c[2], c[3]])
             .collect();
-        let ncv = self.corner_cv.iter().max().map_or(0, |&m| m as usize + 1);
         let points: Vec<[Affine; 3]> = (0..ncv)
             .map(|cv| {
                 std::array::from_fn(|r| {

@@ -300,7 +300,7 @@ fn orthonormalise(f: Frame) -> Frame {
 }
 
 /// A right-handed `(t₁, t₂)` with `t₁ × t₂ = n` for a unit `n`.
-fn tangents(n: [f64; 3]) -> ([f64; 3], [f64; 3]) {
+pub(crate) fn tangents(n: [f64; 3]) -> ([f64; 3], [f64; 3]) {
     let helper = if n[0].abs() <= n[1].abs() && n[0].abs() <= n[2].abs() {
         [1.0, 0.0, 0.0]
     } else if n[1].abs() <= n[2].abs() {

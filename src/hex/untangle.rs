@@ -118,7 +118,7 @@ pub struct UntangleReport {
     pub unknowns: usize,
     /// Tetrahedra in its energy.
     pub tets: usize,
-    /// Values of `ε` and L-BFGS iterations, over all regions.
+    /// Values of `ε` minimised, over all regions.
     pub stages: usize,
     /// L-BFGS iterations over all regions.
     pub iterations: usize,
@@ -171,6 +171,14 @@ impl Problem<'_> {
     fn det(&self, t: usize, z: &[f64]) -> f64 {
         let k = self.k(t, z);
         dot(k[0], cross(k[1], k[2]))
+    }
+
+    /// Smallest `det K` over all tetrahedra.
+    fn min_det(&self, z: &[f64]) -> f64 {
+        (0..self.corners.len())
+            .into_par_iter()
+            .map(|t| self.det(t, z))
+            .reduce(|| f64::INFINITY, f64::min)
     }
 
     /// Tetrahedra with `det K ≤ 0`.
@@ -447,7 +455,7 @@ pub fn untangle(
         && seeds.len() as f64 > params.max_inverted_fraction * p.corners.len() as f64;
     report.too_many = too_many;
     if seeds.is_empty() || too_many {
-        report.min_det = min_det(p, z, &(0..p.corners.len() as u32).collect::<Vec<_>>());
+        report.min_det = p.min_det(z);
         return report;
     }
     let incidence = Incidence::new(p, z.len());
@@ -478,7 +486,11 @@ pub fn untangle(
         report.tets = region.tets.len();
         let mut x: Vec<f64> = region.moving.iter().map(|&i| z[i as usize]).collect();
         let mut work = z.to_vec();
-        let mut dmin = min_det(p, z, &region.tets);
+        let mut dmin = region
+            .tets
+            .par_iter()
+            .map(|&t| p.det(t as usize, z))
+            .reduce(|| f64::INFINITY, f64::min);
         let mut eps = (1e-10 + 0.04 * dmin * dmin).sqrt();
         let mut grad = vec![0.0; x.len()];
         let mut e_prev = energy(p, &region, z, eps, params.lambda, &mut grad);
@@ -493,7 +505,12 @@ pub fn untangle(
             };
             report.iterations += lbfgs(&mut f, &mut x, params.max_iterations);
             let e = f(&x, &mut grad);
-            dmin = min_det(p, &work, &region.tets);
+            let dets: Vec<f64> = region
+                .tets
+                .par_iter()
+                .map(|&t| p.det(t as usize, &work))
+                .collect();
+            dmin = dets.iter().copied().fold(f64::INFINITY, f64::min);
             let sigma = (1.0 - e / e_prev).max(0.1);
             let mu = (1.0 - sigma) * chi(dmin, eps).0;
             eps = if dmin < mu {
@@ -507,11 +524,7 @@ pub fn untangle(
                 break;
             }
             // Stalled: the inverted tetrahedra have not become fewer for a few stages.
-            let inverted = region
-                .tets
-                .iter()
-                .filter(|&&t| p.det(t as usize, &work) <= 0.0)
-                .count();
+            let inverted = dets.iter().filter(|&&d| d <= 0.0).count();
             if inverted < best.0 {
                 best = (inverted, stage);
             } else if stage >= best.1 + STALL_STAGES {
@@ -526,7 +539,7 @@ pub fn untangle(
             break;
         }
     }
-    report.min_det = min_det(p, z, &(0..p.corners.len() as u32).collect::<Vec<_>>());
+    report.min_det = p.min_det(z);
     report
 }
 
@@ -539,19 +552,6 @@ pub enum Freedom {
     Free,
     /// In the plane through it with this unit normal.
     Plane([f64; 3]),
-}
-
-/// Two unit vectors spanning the plane normal to the unit vector `n`.
-fn tangents(n: [f64; 3]) -> [[f64; 3]; 2] {
-    let a = if n[0].abs() < 0.6 {
-        [1.0, 0.0, 0.0]
-    } else {
-        [0.0, 1.0, 0.0]
-    };
-    let t1 = cross(n, a);
-    let l = dot(t1, t1).sqrt();
-    let t1 = t1.map(|x| x / l);
-    [t1, cross(n, t1)]
 }
 
 /// Untangles hexahedra (vertices `verts`, corners in VTK order) by their corner tetrahedra:
@@ -574,7 +574,10 @@ pub fn untangle_hexes(
             let dirs: Vec<[f64; 3]> = match *f {
                 Freedom::Fixed => Vec::new(),
                 Freedom::Free => vec![[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
-                Freedom::Plane(n) => tangents(n).to_vec(),
+                Freedom::Plane(n) => {
+                    let (t1, t2) = super::smooth_frames::tangents(n);
+                    vec![t1, t2]
+                }
             };
             let first = z.len() as u32;
             z.extend(dirs.iter().map(|_| 0.0));
@@ -597,11 +600,8 @@ pub fn untangle_hexes(
             .iter()
             .map(|&[a, b]| {
                 let (p, q) = (verts[h[a] as usize], verts[h[b] as usize]);
-                dot(
-                    [p[0] - q[0], p[1] - q[1], p[2] - q[2]],
-                    [p[0] - q[0], p[1] - q[1], p[2] - q[2]],
-                )
-                .sqrt()
+                let d = [0, 1, 2].map(|x| p[x] - q[x]);
+                dot(d, d).sqrt()
             })
             .sum::<f64>()
             / 12.0;
@@ -661,12 +661,6 @@ fn conflicts(corners: &[[u32; 4]]) -> Vec<[u32; 2]> {
     }
     out.sort_unstable();
     out
-}
-
-fn min_det(p: &Problem<'_>, z: &[f64], tets: &[u32]) -> f64 {
-    tets.par_iter()
-        .map(|&t| p.det(t as usize, z))
-        .reduce(|| f64::INFINITY, f64::min)
 }
 
 #[cfg(test)]
