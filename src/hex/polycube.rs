@@ -428,9 +428,15 @@ fn remove_turns(
     for &c in &chart {
         size[c as usize] += 1;
     }
-    let mut changed = false;
-    for runs in borders.values() {
-        if runs[0].is_empty() || runs[1].is_empty() {
+    // Charts relabelled in this pass: their borders are stale until the next pass
+    // recomputes the charts.
+    let mut touched = std::collections::BTreeSet::new();
+    for (&(c0, c1), runs) in &borders {
+        if runs[0].is_empty()
+            || runs[1].is_empty()
+            || touched.contains(&c0)
+            || touched.contains(&c1)
+        {
             continue;
         }
         let minority = usize::from(runs[1].len() < runs[0].len());
@@ -521,9 +527,9 @@ fn remove_turns(
         for k in seen {
             lab[k as usize] = label;
         }
-        changed = true;
+        touched.extend([c0, c1]);
     }
-    changed
+    !touched.is_empty()
 }
 
 /// The label clean-up passes of [`clean_labels`] (module docs): small charts, teeth and

@@ -231,6 +231,30 @@ pub enum TetError {
     },
 }
 
+impl TetError {
+    /// A vertex where the problem lies, for errors that have one (to give its position where
+    /// the indices mean nothing to the user, as in a mesh the tool stuffed itself).
+    pub fn vertex(&self) -> Option<u32> {
+        match self {
+            TetError::NoTetrahedra
+            | TetError::TooManyTetrahedra { .. }
+            | TetError::Disconnected { .. } => None,
+            TetError::NonFiniteVertex { vertex, .. } => u32::try_from(*vertex).ok(),
+            TetError::VertexOutOfRange { verts, vertex, .. } => {
+                verts.iter().copied().find(|v| v != vertex)
+            }
+            TetError::RepeatedVertex { vertex, .. } => Some(*vertex),
+            TetError::Inverted { verts, .. } | TetError::Degenerate { verts, .. } => Some(verts[0]),
+            TetError::NonManifoldFace { face, .. } | TetError::OverlappingTets { face, .. } => {
+                Some(face[0])
+            }
+            TetError::NonManifoldBoundaryEdge { edge, .. }
+            | TetError::NonManifoldEdge { edge, .. } => Some(edge[0]),
+            TetError::NonManifoldVertex { vertex, .. } => Some(*vertex),
+        }
+    }
+}
+
 /// One connected component of the boundary surface (a closed orientable surface).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
 pub struct BoundarySurface {

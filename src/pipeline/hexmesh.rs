@@ -155,15 +155,35 @@ fn read_tets(
     let (mesh, stuffed, scale) = if is_surface(path) {
         let surface = read_surface(path)?;
         let scale = scale.unwrap_or_else(|| bounds(&surface.vertices).diagonal() / 20.0);
-        let (m, r) = stuff_surface(path, &surface, tet_size.unwrap_or(scale / 2.0))?;
-        (m, Some(r), scale)
+        let size = tet_size.unwrap_or(scale / 2.0);
+        let (m, r) = stuff_surface(path, &surface, size)?;
+        (m, Some((r, size)), scale)
     } else {
         let m = crate::io::volume::read(path)?.into_tet_mesh(path)?;
         let scale = scale.unwrap_or_else(|| bounds(&m.verts).diagonal() / 20.0);
         (m, None, scale)
     };
-    let topo = check_tets(&mesh).map_err(|e| Error::input(path, e.to_string()))?;
-    Ok((mesh, topo, stuffed, scale))
+    let topo = check_tets(&mesh).map_err(|e| match &stuffed {
+        None => Error::input(path, e.to_string()),
+        // The stuffed mesh's indices are ours: say where, and why it happens.
+        Some((_, size)) => {
+            let at = e
+                .vertex()
+                .and_then(|v| mesh.verts.get(v as usize))
+                .map(|p| format!(" near ({:.6}, {:.6}, {:.6})", p[0], p[1], p[2]))
+                .unwrap_or_default();
+            Error::input(
+                path,
+                format!(
+                    "the tetrahedra stuffed into the surface at --tet-size {} are not a valid \
+                     mesh{at}: {e}; the solid is thinner there, or two of its parts are closer, \
+                     than the stuffing lattice resolves: try a smaller --tet-size",
+                    size
+                ),
+            )
+        }
+    })?;
+    Ok((mesh, topo, stuffed.map(|s| s.0), scale))
 }
 
 fn bounds(verts: &[[f64; 3]]) -> Aabb {

@@ -268,24 +268,9 @@ fn the_fandisk_becomes_hexes_with_none_inverted() {
     assert!(c["reference"]["max"].as_f64().unwrap() < 3.0, "{c}");
 }
 
-#[test]
-fn a_closed_surface_is_stuffed_then_meshed_or_the_failure_named() {
-    // A 2 × 1.5 × 1 box as 12 outward triangles: stuffed with tetrahedra (winding number),
-    // then CubeCover. Stuffing bevels the corners, and snapping the planes there can flip
-    // tetrahedra: then the run must say so, name the rounding and write nothing.
-    let d = tempfile::tempdir().unwrap();
-    let ply = d.path().join("boxs.ply");
-    let v = [
-        [-1.0, -0.75, -0.5],
-        [1.0, -0.75, -0.5],
-        [1.0, 0.75, -0.5],
-        [-1.0, 0.75, -0.5],
-        [-1.0, -0.75, 0.5],
-        [1.0, -0.75, 0.5],
-        [1.0, 0.75, 0.5],
-        [-1.0, 0.75, 0.5],
-    ];
-    let f = [
+/// Axis-aligned boxes (min, max corners) as one ASCII PLY of 12 outward triangles each.
+fn boxes_ply(boxes: &[([f64; 3], [f64; 3])]) -> String {
+    const FACES: [[usize; 3]; 12] = [
         [0, 2, 1],
         [0, 3, 2],
         [4, 5, 6],
@@ -299,15 +284,35 @@ fn a_closed_surface_is_stuffed_then_meshed_or_the_failure_named() {
         [3, 0, 4],
         [3, 4, 7],
     ];
-    let mut text = String::from(
-        "ply\nformat ascii 1.0\nelement vertex 8\nproperty float x\nproperty float y\nproperty float z\nelement face 12\nproperty list uchar int vertex_indices\nend_header\n",
+    let mut text = format!(
+        "ply\nformat ascii 1.0\nelement vertex {}\nproperty float x\nproperty float y\nproperty float z\nelement face {}\nproperty list uchar int vertex_indices\nend_header\n",
+        8 * boxes.len(),
+        12 * boxes.len()
     );
-    for p in v {
-        text += &format!("{} {} {}\n", p[0], p[1], p[2]);
+    for (lo, hi) in boxes {
+        for k in 0..8 {
+            let x = if (k + 1) % 4 >= 2 { hi[0] } else { lo[0] };
+            let y = if k % 4 >= 2 { hi[1] } else { lo[1] };
+            let z = if k >= 4 { hi[2] } else { lo[2] };
+            text += &format!("{x} {y} {z}\n");
+        }
     }
-    for t in f {
-        text += &format!("3 {} {} {}\n", t[0], t[1], t[2]);
+    for b in 0..boxes.len() {
+        for t in FACES {
+            text += &format!("3 {} {} {}\n", 8 * b + t[0], 8 * b + t[1], 8 * b + t[2]);
+        }
     }
+    text
+}
+
+#[test]
+fn a_closed_surface_is_stuffed_then_meshed_or_the_failure_named() {
+    // A 2 × 1.5 × 1 box as 12 outward triangles: stuffed with tetrahedra (winding number),
+    // then CubeCover. Stuffing bevels the corners, and snapping the planes there can flip
+    // tetrahedra: then the run must say so, name the rounding and write nothing.
+    let d = tempfile::tempdir().unwrap();
+    let ply = d.path().join("boxs.ply");
+    let text = boxes_ply(&[([-1.0, -0.75, -0.5], [1.0, 0.75, 0.5])]);
     std::fs::write(&ply, text).unwrap();
     let out = d.path().join("boxs.vtk");
     let rep = d.path().join("boxs.json");
@@ -342,6 +347,39 @@ fn a_closed_surface_is_stuffed_then_meshed_or_the_failure_named() {
         );
         assert!(!out.exists());
     }
+}
+
+#[test]
+fn a_stuffing_that_cannot_resolve_the_solid_says_where() {
+    // Two cubes touching along an edge: the stuffed tetrahedra meet there in a boundary edge
+    // of four triangles. The indices of the stuffed mesh mean nothing to the user, so the
+    // error gives the place and the --tet-size, and writes nothing.
+    let d = tempfile::tempdir().unwrap();
+    let ply = d.path().join("touching.ply");
+    std::fs::write(
+        &ply,
+        boxes_ply(&[
+            ([-0.5, -0.5, -0.5], [0.5, 0.5, 0.5]),
+            ([0.5, 0.5, -0.5], [1.5, 1.5, 0.5]),
+        ]),
+    )
+    .unwrap();
+    let out = d.path().join("touching.vtk");
+    let e = fails(&[
+        "hexmesh",
+        s(&ply),
+        "-o",
+        s(&out),
+        "--tet-size",
+        "0.2",
+        "--progress",
+        "none",
+    ]);
+    assert!(
+        e.contains("touching.ply") && e.contains("--tet-size 0.2") && e.contains("near (0.5"),
+        "{e}"
+    );
+    assert!(!out.exists());
 }
 
 /// A closed cylinder of radius 1 and height 2 along z, `n` sides, outward triangles, as ASCII
