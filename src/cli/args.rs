@@ -544,7 +544,8 @@ pub struct ReconstructArgs {
     #[arg(long, default_value_t = 1.0)]
     pub smooth: f64,
     /// Keep the vertices where marching cubes put them, instead of moving each onto the
-    /// plane of its nearest input points (by what exceeds the plane's standard error).
+    /// plane (or, where they are curved, the quadratic jet) of its nearest input points (by
+    /// what exceeds the fit's standard error).
     #[arg(long)]
     pub no_fit: bool,
     /// Tile fields and marching cubes on the GPU. Same output either way. Off by default:

@@ -1,5 +1,5 @@
 //! The work directory's checkpoint formats: a leaf's detail (`SFLEAF03`) and a tile's mesh
-//! (`SFTILE05`, positions relative to the cube's lower corner), both zstd-compressed little-endian records written atomically, so that a
+//! (`SFTILE06`, positions relative to the cube's lower corner), both zstd-compressed little-endian records written atomically, so that a
 //! killed run leaves each file whole or absent and a resumed run reuses what it finds.
 
 use std::path::{Path, PathBuf};
@@ -119,7 +119,7 @@ pub fn leaf_detail(dir: &Path, key: CellKey, m: usize) -> Result<Detail> {
 
 /// Tile checkpoints: this magic, then the counts of vertices, triangles, colours and
 /// intensities (u64 each), then the records ([`write_tile`]).
-const TILE_MAGIC: &[u8; 8] = b"SFTILE05";
+const TILE_MAGIC: &[u8; 8] = b"SFTILE06";
 /// Bytes of a tile checkpoint's header: magic and four counts.
 const TILE_HEADER: usize = 40;
 /// Bytes of a tile checkpoint's vertex: edge key (u64) and position (f64×3).
@@ -174,6 +174,16 @@ pub fn read_tile(path: &Path) -> Result<TileMesh> {
     let z = std::fs::read(path).with_path(path)?;
     let bad = |what: &str| Error::input(path, format!("corrupt tile checkpoint: {what}"));
     let raw = zstd::stream::decode_all(&z[..]).map_err(|e| bad(&e.to_string()))?;
+    if raw.len() >= 8 && raw[..6] == TILE_MAGIC[..6] && raw[..8] != TILE_MAGIC[..] {
+        return Err(Error::input(
+            path,
+            format!(
+                "tile checkpoint written by another version of scanflow ({}; this one reads {}): run again without --resume in a new work directory",
+                String::from_utf8_lossy(&raw[..8]),
+                String::from_utf8_lossy(TILE_MAGIC)
+            ),
+        ));
+    }
     if raw.len() < TILE_HEADER || &raw[..8] != TILE_MAGIC {
         return Err(bad("wrong magic"));
     }

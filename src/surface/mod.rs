@@ -10,6 +10,23 @@
 //! through `c` with normal `n`, the eigenvector of `M`'s least eigenvalue `λ₀`, is the local
 //! least-squares surface, and `d = (v − c)·n` is `v`'s offset from it.
 //!
+//! **Curved surfaces: the jet.** On a surface of curvature radius `R` the plane of a
+//! neighbourhood of radius `r` sits about `r²/(4R)` off it, so fine relief is flattened (a
+//! sphere of radius 1 sampled by 1M points, fitted at depth 9, came out 2.4·10⁻⁵ off on
+//! average, a relief of 1% amplitude and 18 voxels' wavelength 4.2·10⁻⁴). Over the plane's
+//! frame (tangents `t₁, t₂` from `M`'s other eigenvectors, `x = (p − c)·t₁`,
+//! `y = (p − c)·t₂`, `z = (p − c)·n`) the neighbours are also fitted by the osculating jet
+//! of order 2, `z = h(x, y) = q₀ + q₁x + q₂y + q₃x² + q₄xy + q₅y²`, by least squares
+//! (Cazals & Pouget, "Estimating differential quantities using polynomial fitting of
+//! osculating jets", 2003, §3), and the jet replaces the plane when its three curvature terms
+//! are significant: an F ratio `((RSS_plane − RSS_jet)/3)/(RSS_jet/(k − 6))` above
+//! `fit::JET_F_RATIO` (20; 5.6, the 99th percentile of F(3, 14), also took jets from noise,
+//! and the noisy relief's largest error grew by half). The offset is then
+//! `d = z(v) − h(x(v), y(v))`, its standard error the jet's at `q₀`, and the edge fit solves
+//! the quadratic in the move along the edge, taking the root nearest the vertex. Measured at
+//! depth 9, 1M points: sphere 2.4·10⁻⁵ → 4.7·10⁻⁶, the relief 4.2·10⁻⁴ → 1.2·10⁻⁴ (mean
+//! two-sided distance to the exact surface), noisy inputs unchanged.
+//!
 //! **Two fits, and which one a vertex takes** ([`fit`], [`settle()`]). Marching cubes puts each
 //! vertex on a grid edge, and each triangle's three corners on three distinct edges of one
 //! cell. The *free fit* moves `v` by the offset along `n`, the plain projection. The *edge
@@ -24,9 +41,9 @@
 //! last place inside its edge stays strictly inside the rounded edge ([`fit::edge_margin`]
 //! takes the larger margin). An edge nearly parallel to the plane stops the vertex at its
 //! end, closer to the plane than it was; a vertex that slid more than a tenth of a voxel is
-//! fitted once more, to the plane of the points nearest to where it went (the first plane,
-//! fitted around the start, misses a curved surface there), keeping the offset the first
-//! step kept.
+//! fitted once more, to the plane (or jet) of the points nearest to where it went (the first
+//! one, fitted around the start, misses a curved surface there), keeping the offset the
+//! first step kept.
 //!
 //! A vertex then takes its free fit where that is safe, else its edge fit ([`settle()`]): when
 //! its edge lies inside a block of leaf-sized cells (so its four cells, and all its
