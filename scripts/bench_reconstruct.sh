@@ -24,15 +24,6 @@ mkdir -p "$DIR"
 cargo build --release --quiet
 BIN=$PWD/target/release/scanflow
 python3 -c "import pymeshlab" 2>/dev/null || python3 -m pip install --quiet pymeshlab
-cat > "$DIR/peer.py" <<'PY'
-import sys, pymeshlab
-src, out, depth, threads = sys.argv[1], sys.argv[2], int(sys.argv[3]), int(sys.argv[4])
-ms = pymeshlab.MeshSet()
-ms.load_new_mesh(src)
-ms.generate_surface_reconstruction_screened_poisson(depth=depth, threads=threads, preclean=False)
-ms.save_current_mesh(out, binary=True, save_vertex_normal=False, save_vertex_color=False,
-                     save_vertex_quality=False, save_face_color=False, save_face_quality=False)
-PY
 
 # run LABEL CMD...: wall seconds and peak RSS (KiB) from GNU time into $DIR/LABEL.time
 run() {
@@ -51,7 +42,7 @@ for shape in $SHAPES; do
   for depth in $DEPTHS; do
     cat "$PLY" > /dev/null
     run "ours_${shape}_$depth" "$BIN" reconstruct "$PLY" -o "$DIR/ours_${shape}_$depth.ply" --depth "$depth" --threads "$THREADS" --progress none
-    run "peer_${shape}_$depth" python3 "$DIR/peer.py" "$PLY" "$DIR/peer_${shape}_$depth.ply" "$depth" "$THREADS"
+    run "peer_${shape}_$depth" python3 scripts/poisson_peer.py "$PLY" "$DIR/peer_${shape}_$depth.ply" "$depth" "$THREADS"
     dist "$DIR/ours_${shape}_$depth.ply" "$TRUTH" > "$DIR/ours_${shape}_$depth.json"
     dist "$DIR/peer_${shape}_$depth.ply" "$TRUTH" > "$DIR/peer_${shape}_$depth.json"
     python3 - "$DIR" "$shape" "$depth" <<'PY'

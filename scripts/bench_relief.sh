@@ -1,10 +1,11 @@
 #!/usr/bin/env bash
-# Fine relief without noise: scanflow reconstruct (vertex fit on, and --no-fit) against
-# PoissonRecon (screened, pymeshlab) on the same points, same depth, same run. A sphere of
-# radius 1 carries the relief 1 + a sin(k x) sin(k y) sin(k z) (scripts/relief_points.py);
-# its wavelength 2π/k is WAVES voxels at DEPTH (a voxel is 1.1 × the bounding box over
-# 2^DEPTH, PoissonRecon's and scanflow's cube). Prints the mean and max two-sided distance to
-# the exact surface and the ratios scanflow / PoissonRecon (below 1: scanflow closer).
+# Fine relief, with and without noise: scanflow reconstruct (vertex fit on, and --no-fit)
+# against PoissonRecon (screened, pymeshlab) and Open3D's Poisson on the same points, same
+# depth, same run (scripts/poisson_peer.py). A sphere of radius 1 carries the relief
+# 1 + a sin(k x) sin(k y) sin(k z) (scripts/relief_points.py); its wavelength 2π/k is WAVES
+# voxels at DEPTH (a voxel is 1.1 × the bounding box over 2^DEPTH, PoissonRecon's and
+# scanflow's cube). Prints the mean and max two-sided distance to the exact surface, wall time
+# and peak memory, and the ratios scanflow / peer (below 1: scanflow better).
 #
 #   scripts/bench_relief.sh                                  # 1M points, depth 9, a = 1%
 #   N=200000 WAVES="18" AMPS="0.005 0.02" NOISES=0 scripts/bench_relief.sh
@@ -21,15 +22,6 @@ mkdir -p "$DIR"
 cargo build --release --quiet
 BIN=$PWD/target/release/scanflow
 python3 -c "import pymeshlab, numpy" 2>/dev/null || python3 -m pip install --quiet pymeshlab numpy
-cat > "$DIR/peer.py" <<'PY'
-import sys, pymeshlab
-src, out, depth, threads = sys.argv[1], sys.argv[2], int(sys.argv[3]), int(sys.argv[4])
-ms = pymeshlab.MeshSet()
-ms.load_new_mesh(src)
-ms.generate_surface_reconstruction_screened_poisson(depth=depth, threads=threads, preclean=False)
-ms.save_current_mesh(out, binary=True, save_vertex_normal=False, save_vertex_color=False,
-                     save_vertex_quality=False, save_face_color=False, save_face_quality=False)
-PY
 dist() {
   "$BIN" check "$1" --truth "$2" --samples 200000 --json | python3 -c '
 import json, sys
@@ -37,8 +29,18 @@ c = json.load(sys.stdin)["comparison"]["absolute"]
 print(0.5 * (c["to_reference"]["mean"] + c["from_reference"]["mean"]),
       max(c["to_reference"]["max"], c["from_reference"]["max"]))'
 }
-printf '%6s %5s %6s  %10s %10s %10s %6s  %10s %10s %10s %6s  %6s %6s\n' amp waves noise \
-  "fit mean" "nofit mean" "peer mean" ratio "fit max" "nofit max" "peer max" ratio "fit s" "peer s"
+. scripts/peer_env.sh
+if (need_open3d numpy) > /dev/null 2>&1; then O3D=1; else O3D=0; echo "open3d cannot be installed here: its column is left out"; fi
+# run LABEL CMD...: wall seconds and peak RSS (MiB) of CMD, printed as "S MIB"
+run() {
+  local label=$1; shift
+  /usr/bin/time -f "%e %M" -o "$DIR/$label.time" "$@" > "$DIR/$label.log" 2>&1 || {
+    echo "$label failed:" >&2; tail -5 "$DIR/$label.log" >&2; exit 1; }
+  awk '{printf "%s %.0f\n", $1, $2 / 1024}' "$DIR/$label.time"
+}
+printf '%5s %4s %5s | %9s %9s %9s %9s %5s %5s | %9s %9s %9s %5s | %5s %5s %5s | %4s %4s %4s\n' \
+  amp wave noise "fit" "no-fit" "PR" "O3D" "/PR" "/O3D" "fit max" "PR max" "O3D max" "/PR" \
+  "fit s" "PR s" "O3D s" "MiB" "PR" "O3D"
 for a in $AMPS; do
   for w in $WAVES; do
     k=$(python3 -c "import math; print(2 * math.pi / ($w * 1.1 * 2 * (1 + $a) / 2 ** $DEPTH))")
@@ -47,21 +49,27 @@ for a in $AMPS; do
       PLY=$DIR/$tag.ply
       [ -f "$PLY" ] || python3 scripts/relief_points.py "$N" "$a" "$k" "$noise" "$PLY"
       TRUTH=$DIR/$tag.truth.json
-      t0=$(date +%s.%N)
-      "$BIN" reconstruct "$PLY" -o "$DIR/fit_$tag.ply" --depth "$DEPTH" --threads "$THREADS" --progress none > /dev/null
-      t1=$(date +%s.%N)
-      "$BIN" reconstruct "$PLY" -o "$DIR/nofit_$tag.ply" --depth "$DEPTH" --threads "$THREADS" --no-fit --progress none > /dev/null
-      t2=$(date +%s.%N)
-      python3 "$DIR/peer.py" "$PLY" "$DIR/peer_$tag.ply" "$DEPTH" "$THREADS" > /dev/null 2>&1
-      t3=$(date +%s.%N)
+      cat "$PLY" > /dev/null
+      read -r fs fmb < <(run "fit_$tag" "$BIN" reconstruct "$PLY" -o "$DIR/fit_$tag.ply" --depth "$DEPTH" --threads "$THREADS" --progress none)
+      run "nofit_$tag" "$BIN" reconstruct "$PLY" -o "$DIR/nofit_$tag.ply" --depth "$DEPTH" --threads "$THREADS" --no-fit --progress none > /dev/null
+      read -r ps pmb < <(run "pr_$tag" python3 scripts/poisson_peer.py "$PLY" "$DIR/pr_$tag.ply" "$DEPTH" "$THREADS")
       read -r fm fx < <(dist "$DIR/fit_$tag.ply" "$TRUTH")
       read -r nm nx < <(dist "$DIR/nofit_$tag.ply" "$TRUTH")
-      read -r pm px < <(dist "$DIR/peer_$tag.ply" "$TRUTH")
+      read -r pm px < <(dist "$DIR/pr_$tag.ply" "$TRUTH")
+      os=nan omb=nan om=nan ox=nan
+      if [ "$O3D" = 1 ]; then
+        read -r os omb < <(run "o3d_$tag" python3 scripts/poisson_peer.py --open3d "$PLY" "$DIR/o3d_$tag.ply" "$DEPTH" "$THREADS")
+        read -r om ox < <(dist "$DIR/o3d_$tag.ply" "$TRUTH")
+      fi
       python3 -c "
-fm, nm, pm, fx, nx, px = $fm, $nm, $pm, $fx, $nx, $px
-print('%6s %5s %6s  %10.3e %10.3e %10.3e %6.2f  %10.3e %10.3e %10.3e %6.2f  %6.1f %6.1f' % (
-    '$a', '$w', '$noise', fm, nm, pm, fm / pm, fx, nx, px, fx / px, $t1 - $t0, $t3 - $t2))"
+n = float('nan')
+fm, nm, pm, om, fx, px, ox = $fm, $nm, $pm, $om, $fx, $px, $ox
+fs, ps, os_, fmb, pmb, omb = $fs, $ps, $os, $fmb, $pmb, $omb
+print('%5s %4s %5s | %9.2e %9.2e %9.2e %9.2e %5.2f %5.2f | %9.2e %9.2e %9.2e %5.2f | %5.1f %5.1f %5.1f | %4.0f %4.0f %4.0f' % (
+    '$a', '$w', '$noise', fm, nm, pm, om, fm / pm, fm / om, fx, px, ox, fx / px, fs, ps, os_, fmb, pmb, omb))"
     done
   done
 done
-echo "target: mean ratio <= 1 at every wavelength without noise (issue: screened solve, curvature fit)"
+echo "mean two-sided distance to the exact surface (fit, --no-fit, PoissonRecon, Open3D), ratios"
+echo "scanflow / peer; max; wall seconds; peak MiB. Target: mean ratio <= 1 on every row, time"
+echo "ratio <= 0.5 and memory ratio <= 0.25 (issue: screened solve, curvature fit)"
