@@ -2,9 +2,9 @@
 # Fine relief, with and without noise: scanflow reconstruct (vertex fit on, and --no-fit)
 # against PoissonRecon (screened, pymeshlab) and Open3D's Poisson on the same points, same
 # depth, same run (scripts/poisson_peer.py). A sphere of radius 1 carries the relief
-# 1 + a sin(k x) sin(k y) sin(k z) (scripts/relief_points.py); its wavelength 2π/k is WAVES
-# voxels at DEPTH (a voxel is 1.1 × the bounding box over 2^DEPTH, PoissonRecon's and
-# scanflow's cube). Prints the mean and max two-sided distance to the exact surface, wall time
+# 1 + a sin(k x) sin(k y) sin(k z) (`scanflow synth bumpy --amplitude a --frequency k`); its
+# wavelength 2π/k is WAVES voxels at DEPTH (a voxel is 1.1 × the bounding box over 2^DEPTH,
+# PoissonRecon's and scanflow's cube). Prints the mean and max two-sided distance to the exact surface, wall time
 # and peak memory, and the ratios scanflow / peer (below 1: scanflow better).
 #
 #   scripts/bench_relief.sh                                  # 1M points, depth 9, a = 1%
@@ -47,7 +47,8 @@ for a in $AMPS; do
     for noise in $NOISES; do
       tag=a${a}_w${w}_n${noise}
       PLY=$DIR/$tag.ply
-      [ -f "$PLY" ] || python3 scripts/relief_points.py "$N" "$a" "$k" "$noise" "$PLY"
+      [ -f "$PLY" ] || "$BIN" synth bumpy --points "$N" --amplitude "$a" --frequency "$k" \
+        --noise "$noise" -o "$PLY" --progress none > /dev/null
       TRUTH=$DIR/$tag.truth.json
       cat "$PLY" > /dev/null
       read -r fs fmb < <(run "fit_$tag" "$BIN" reconstruct "$PLY" -o "$DIR/fit_$tag.ply" --depth "$DEPTH" --threads "$THREADS" --progress none)

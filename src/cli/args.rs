@@ -463,6 +463,14 @@ pub struct SynthArgs {
     /// Random seed.
     #[arg(long, default_value_t = DEFAULT_SEED)]
     pub seed: u64,
+    /// Relief amplitude of `bumpy`, relative to the radius: r(u) = 1 + A sin(K u_x)
+    /// sin(K u_y) sin(K u_z) (default 0.05).
+    #[arg(long)]
+    pub amplitude: Option<f64>,
+    /// Relief frequency K of `bumpy`, per unit of the unit sphere's coordinates: a wavelength
+    /// of 2π/K (default 8).
+    #[arg(long)]
+    pub frequency: Option<f64>,
     /// Output PLY.
     #[arg(short, long)]
     pub output: PathBuf,

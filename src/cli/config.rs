@@ -12,7 +12,7 @@ use scanflow::normals::{NormalParams, NormalsMode};
 use scanflow::pipeline::ReconParams;
 use scanflow::pipeline::ingest::IngestParams;
 use scanflow::recon::DEPTHS;
-use scanflow::synth::Shape;
+use scanflow::synth::{Shape, Truth};
 
 use super::args::{
     CheckArgs, Cli, Cmd, Common, DemoArgs, HexcheckArgs, HexmeshArgs, InfoArgs, IngestArgs,
@@ -242,6 +242,8 @@ pub struct SynthConfig {
     pub noise: f64,
     /// Random seed.
     pub seed: u64,
+    /// `bumpy`'s relief (amplitude, frequency), when not the standard one.
+    pub relief: Option<[f64; 2]>,
     /// Output PLY.
     pub output: PathBuf,
 }
@@ -249,12 +251,34 @@ pub struct SynthConfig {
 impl SynthConfig {
     fn new(a: SynthArgs) -> Result<SynthConfig> {
         paths::output_file(&a.output, paths::PLY)?;
+        let shape: Shape = a.shape.into();
+        let relief = match (a.amplitude, a.frequency) {
+            (None, None) => None,
+            (amplitude, frequency) => {
+                if shape != Shape::Bumpy {
+                    bail!(
+                        "--amplitude and --frequency shape the relief of bumpy, not of {}",
+                        shape.name()
+                    );
+                }
+                let Truth::Bumpy {
+                    amplitude: a0,
+                    frequency: k0,
+                    ..
+                } = Truth::standard(Shape::Bumpy)
+                else {
+                    unreachable!("the standard bumpy truth is bumpy")
+                };
+                Some([amplitude.unwrap_or(a0), frequency.unwrap_or(k0)])
+            }
+        };
         Ok(SynthConfig {
             run: RunConfig::new(&a.common)?,
-            shape: a.shape.into(),
+            shape,
             points: a.points,
             noise: a.noise,
             seed: a.seed,
+            relief,
             output: a.output,
         })
     }

@@ -34,7 +34,7 @@ pub fn run(c: &DemoConfig, ctx: &Ctx) -> Result<()> {
         remove_old(p)?;
     }
     workdir::remove_owned(&work)?;
-    let rep = synthesise(ctx, Shape::Bumpy, c.points, NOISE, DEFAULT_SEED, &ply)?;
+    let rep = synthesise(ctx, Shape::Bumpy, None, c.points, NOISE, DEFAULT_SEED, &ply)?;
     report::demo_synth(&rep, NOISE);
     let points = Points::Files(Inputs::file(ply.clone()), NormalsConfig::default());
     let params = ReconParams::new(DEFAULT_DEPTH, work);

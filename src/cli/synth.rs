@@ -12,16 +12,17 @@ use super::report;
 
 /// Write the samples and print what was written.
 pub fn run(c: &SynthConfig, ctx: &Ctx) -> Result<()> {
-    let r = synthesise(ctx, c.shape, c.points, c.noise, c.seed, &c.output)?;
+    let r = synthesise(ctx, c.shape, c.relief, c.points, c.noise, c.seed, &c.output)?;
     report::synth(&r, c.shape, &c.output);
     Ok(())
 }
 
-/// Sample `points` points of `shape` with `noise` into `out` (and its `.truth.json`),
-/// counting them on a progress stage.
+/// Sample `points` points of `shape` (with `relief`, for `bumpy`) with `noise` into `out` (and
+/// its `.truth.json`), counting them on a progress stage.
 pub fn synthesise(
     ctx: &Ctx,
     shape: Shape,
+    relief: Option<[f64; 2]>,
     points: u64,
     noise: f64,
     seed: u64,
@@ -29,6 +30,7 @@ pub fn synthesise(
 ) -> Result<SynthReport> {
     let params = SynthParams {
         shape,
+        relief,
         points,
         noise,
         seed,

@@ -16,7 +16,8 @@
 //!   Normals point out of the solid: outward on the outer sphere, toward the centre on the
 //!   inner one.
 //! * `bumpy`: the radial graph `s(u) = r(u) u` over unit directions `u`, with
-//!   `r(u) = R (1 + a sin(k u_x) sin(k u_y) sin(k u_z))`, R = 1, a = 0.05, k = 8. Normals are
+//!   `r(u) = R (1 + a sin(k u_x) sin(k u_y) sin(k u_z))`, R = 1, a = 0.05, k = 8 (a and k
+//!   chosen by [`SynthParams::relief`]). Normals are
 //!   the normalised gradient of `F(p) = |p| - r(p/|p|)`.
 //! * `heightfield`: the graph `z = h(x, y)` over the square `[-1, 1]²`, `h` a plane tilt
 //!   `0.05 x - 0.03 y` plus eight Gaussian bumps of widths 0.08 to 0.4 and heights ±0.05 to
@@ -153,11 +154,21 @@ impl FromStr for Shape {
     }
 }
 
+/// Largest relative relief amplitude of `bumpy` (`--amplitude`).
+pub const MAX_AMPLITUDE: f64 = 0.5;
+
+/// Largest relief frequency of `bumpy` (`--frequency`): a wavelength of about 0.006, finer
+/// than a depth-11 voxel of the unit sphere's cube.
+pub const MAX_FREQUENCY: f64 = 1000.0;
+
 /// Parameters of [`synth`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct SynthParams {
     /// The surface to sample.
     pub shape: Shape,
+    /// `bumpy`'s relief as (amplitude relative to the radius, frequency), instead of the
+    /// standard (0.05, 8); `None` for every other shape.
+    pub relief: Option<[f64; 2]>,
     /// Number of points, at least 1.
     pub points: u64,
     /// Noise standard deviation relative to the bounding-box diagonal of the exact surface
@@ -214,6 +225,26 @@ fn validate(params: &SynthParams, out: &Path) -> Result<()> {
             "--points is 0, expected at least 1 point".to_string(),
         ));
     }
+    if let Some([a, k]) = params.relief {
+        if params.shape != Shape::Bumpy {
+            return Err(Error::Usage(format!(
+                "--amplitude and --frequency shape the relief of bumpy, not of {}",
+                params.shape.name()
+            )));
+        }
+        if !(a.is_finite() && (0.0..=MAX_AMPLITUDE).contains(&a)) {
+            return Err(Error::Usage(format!(
+                "--amplitude is {a}, expected a number from 0 to {MAX_AMPLITUDE} (relative to \
+                 the radius)"
+            )));
+        }
+        if !(k.is_finite() && k > 0.0 && k <= MAX_FREQUENCY) {
+            return Err(Error::Usage(format!(
+                "--frequency is {k}, expected a number above 0 and at most {MAX_FREQUENCY} \
+                 (a wavelength of 2π/K on the unit sphere)"
+            )));
+        }
+    }
     if !(params.noise.is_finite() && params.noise >= 0.0) {
         return Err(Error::Usage(format!(
             "--noise is {}, expected a finite number >= 0 (a fraction of the bounding-box \
@@ -240,7 +271,14 @@ pub fn synth(
 ) -> Result<SynthReport> {
     validate(params, out)?;
     let started = Instant::now();
-    let truth = Truth::standard(params.shape);
+    let truth = match (Truth::standard(params.shape), params.relief) {
+        (Truth::Bumpy { radius, .. }, Some([amplitude, frequency])) => Truth::Bumpy {
+            radius,
+            amplitude,
+            frequency,
+        },
+        (t, _) => t,
+    };
     let sampler = Sampler::new(&truth);
     let exact_box = truth.bounding_box();
     let sigma = params.noise * exact_box.diagonal();
@@ -369,6 +407,7 @@ mod tests {
     fn params(shape: Shape, points: u64) -> SynthParams {
         SynthParams {
             shape,
+            relief: None,
             points,
             noise: 0.0,
             seed: 7,
@@ -534,6 +573,7 @@ mod tests {
             let out = dir.path().join(format!("t{threads}.ply"));
             let p = SynthParams {
                 shape: Shape::Bumpy,
+                relief: None,
                 points: n,
                 noise: 0.002,
                 seed: 42,
@@ -560,6 +600,7 @@ mod tests {
         let out = dir.path().join("other.ply");
         let p = SynthParams {
             shape: Shape::Bumpy,
+            relief: None,
             points: n,
             noise: 0.002,
             seed: 43,
@@ -582,6 +623,7 @@ mod tests {
         let out = dir.path().join("b.ply");
         let p = SynthParams {
             shape: Shape::Bumpy,
+            relief: None,
             points: 1000,
             noise: 0.01,
             seed: u64::MAX,
@@ -622,6 +664,7 @@ mod tests {
         let out = dir.path().join("n.ply");
         let p = SynthParams {
             shape: Shape::Sphere,
+            relief: None,
             points: 100_000,
             noise: 0.01,
             seed: 1,
@@ -640,6 +683,52 @@ mod tests {
         for (p, n) in pts.iter().take(100) {
             assert!((norm(*n) - 1.0).abs() < 1e-6);
             assert!(dot(*p, *n) > 0.8);
+        }
+    }
+
+    #[test]
+    fn a_chosen_relief_is_sampled_and_described() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("r.ply");
+        let (a, k) = (0.01, 80.0);
+        let p = SynthParams {
+            relief: Some([a, k]),
+            ..params(Shape::Bumpy, 2000)
+        };
+        run(&p, &out);
+        let file = TruthFile::load(&truth_path(&out)).unwrap();
+        assert_eq!(
+            file.truth,
+            Truth::Bumpy {
+                radius: 1.0,
+                amplitude: a,
+                frequency: k
+            }
+        );
+        let (_, pts) = read_points(&out);
+        let m = Bumpy::new(1.0, a, k);
+        for (p, _) in &pts {
+            let r = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
+            assert!((1.0 - a - 1e-6..=1.0 + a + 1e-6).contains(&r), "{r}");
+            let u = [p[0] / r, p[1] / r, p[2] / r];
+            assert!((r - m.radius_at(u)).abs() < 1e-6, "{p:?}");
+        }
+        // Only bumpy has a relief, and only a sane one.
+        for (shape, relief, what) in [
+            (Shape::Sphere, [0.01, 8.0], "not of sphere"),
+            (Shape::Bumpy, [0.6, 8.0], "--amplitude is 0.6"),
+            (Shape::Bumpy, [f64::NAN, 8.0], "--amplitude is NaN"),
+            (Shape::Bumpy, [0.01, 0.0], "--frequency is 0"),
+            (Shape::Bumpy, [0.01, 2000.0], "--frequency is 2000"),
+        ] {
+            let p = SynthParams {
+                relief: Some(relief),
+                ..params(shape, 10)
+            };
+            let bad = dir.path().join("bad.ply");
+            let e = synth(&p, &bad, &mut |_| {}).unwrap_err().to_string();
+            assert!(e.contains(what), "{e}");
+            assert!(!bad.exists());
         }
     }
 
