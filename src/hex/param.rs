@@ -137,6 +137,7 @@ pub struct GridMap {
 use std::collections::VecDeque;
 
 use crate::spline::solve::{CholeskyFactor, Triplets};
+use crate::synth::vec::{cross, dot, sub};
 use faer::prelude::*;
 
 use super::frames::{edge_holonomy, face_index};
@@ -439,22 +440,6 @@ impl Elim {
         self.expr[p as usize] = Some(ep);
         Ok(true)
     }
-}
-
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
 /// Gradients of the four barycentric functions of a tetrahedron.

@@ -37,6 +37,8 @@
 
 use rayon::prelude::*;
 
+use crate::synth::vec::{cross, dot};
+
 /// A parameter as an affine function of the unknowns: `constant + Σ c · z[i]`.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Affine {
@@ -130,18 +132,6 @@ pub struct UntangleReport {
     /// Pairs of tetrahedra on the same four points with opposite orientations (at most 16
     /// listed): no map turns both positive, so they are left out of the untangling.
     pub conflicts: Vec<[u32; 2]>,
-}
-
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
 /// `χ(D, ε)` and its derivative in `D`.

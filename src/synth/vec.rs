@@ -1,4 +1,5 @@
-//! Small vector helpers on `[f64; 3]`, shared by [`crate::synth`] and [`crate::metrics`].
+//! Small vector helpers on `[f64; 3]`, shared by [`crate::synth`], [`crate::metrics`] and
+//! [`crate::hex`].
 
 /// Dot product.
 #[inline]
