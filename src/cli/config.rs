@@ -12,7 +12,7 @@ use scanflow::normals::{NormalParams, NormalsMode};
 use scanflow::pipeline::ReconParams;
 use scanflow::pipeline::ingest::IngestParams;
 use scanflow::recon::DEPTHS;
-use scanflow::synth::{Shape, Truth};
+use scanflow::synth::{BUMPY_RELIEF, Shape};
 
 use super::args::{
     CheckArgs, Cli, Cmd, Common, DemoArgs, HexcheckArgs, HexmeshArgs, InfoArgs, IngestArgs,
@@ -252,26 +252,13 @@ impl SynthConfig {
     fn new(a: SynthArgs) -> Result<SynthConfig> {
         paths::output_file(&a.output, paths::PLY)?;
         let shape: Shape = a.shape.into();
-        let relief = match (a.amplitude, a.frequency) {
-            (None, None) => None,
-            (amplitude, frequency) => {
-                if shape != Shape::Bumpy {
-                    bail!(
-                        "--amplitude and --frequency shape the relief of bumpy, not of {}",
-                        shape.name()
-                    );
-                }
-                let Truth::Bumpy {
-                    amplitude: a0,
-                    frequency: k0,
-                    ..
-                } = Truth::standard(Shape::Bumpy)
-                else {
-                    unreachable!("the standard bumpy truth is bumpy")
-                };
-                Some([amplitude.unwrap_or(a0), frequency.unwrap_or(k0)])
-            }
-        };
+        // Checked against the shape and ranges by the library, before any file is touched.
+        let relief = (a.amplitude.is_some() || a.frequency.is_some()).then(|| {
+            [
+                a.amplitude.unwrap_or(BUMPY_RELIEF[0]),
+                a.frequency.unwrap_or(BUMPY_RELIEF[1]),
+            ]
+        });
         Ok(SynthConfig {
             run: RunConfig::new(&a.common)?,
             shape,

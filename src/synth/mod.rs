@@ -87,7 +87,7 @@ use crate::types::{Aabb, Attributes, PointBatch};
 use sampler::{Sampler, generate_chunk};
 
 pub use heightfield::{Bump, HEIGHTFIELD_BUMPS};
-pub use truth::{Truth, TruthFile};
+pub use truth::{BUMPY_RELIEF, Truth, TruthFile};
 
 /// Points generated per chunk; chunk `i` holds points `i × CHUNK_POINTS ..`.
 pub const CHUNK_POINTS: u64 = 65536;

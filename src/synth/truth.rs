@@ -116,6 +116,9 @@ impl TruthFile {
     }
 }
 
+/// The standard bumpy sphere's relief: (amplitude relative to the radius, frequency).
+pub const BUMPY_RELIEF: [f64; 2] = [0.05, 8.0];
+
 impl Truth {
     /// The surface `synth` samples for `shape`.
     pub fn standard(shape: Shape) -> Truth {
@@ -131,8 +134,8 @@ impl Truth {
             },
             Shape::Bumpy => Truth::Bumpy {
                 radius: 1.0,
-                amplitude: 0.05,
-                frequency: 8.0,
+                amplitude: BUMPY_RELIEF[0],
+                frequency: BUMPY_RELIEF[1],
             },
             Shape::HeightField => Truth::HeightField {
                 half_width: 1.0,
