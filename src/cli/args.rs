@@ -551,6 +551,12 @@ pub struct ReconstructArgs {
     /// follows the points more closely.
     #[arg(long, default_value_t = 1.0)]
     pub smooth: f64,
+    /// Screening weight α of the screened Poisson solve (Kazhdan & Hoppe 2013): how
+    /// strongly the surface is pulled through the samples against the smoothed normals, in
+    /// [0, 64]; 0 solves the unscreened equation. PoissonRecon's `--pointWeight` (also
+    /// accepted), with its scaling by depth.
+    #[arg(long, alias = "pointWeight", default_value_t = scanflow::recon::DEFAULT_POINT_WEIGHT)]
+    pub point_weight: f64,
     /// Keep the vertices where marching cubes put them, instead of moving each onto the
     /// plane (or, where they are curved, the quadratic jet) of its nearest input points (by
     /// what exceeds the fit's standard error).

@@ -41,6 +41,11 @@ const TILES: std::ops::RangeInclusive<u64> = 8..=4096;
 /// of the smallest leaf block, 32 voxels).
 const MAX_SMOOTH_VOXELS: f64 = 8.0;
 
+/// Largest `--point-weight`: beyond it the screened solve's conjugate gradients need more
+/// iterations than the leaf solve's time allows, and the surface is held to every sample's
+/// noise.
+const MAX_POINT_WEIGHT: f64 = 64.0;
+
 /// One validated command.
 pub enum Config {
     /// `scanflow synth`.
@@ -371,6 +376,12 @@ impl ReconstructConfig {
         if !(smooth > 0.0 && smooth <= MAX_SMOOTH_VOXELS) {
             bail!("--smooth {smooth}: expected a width in voxels in (0, {MAX_SMOOTH_VOXELS}]");
         }
+        let point_weight = a.point_weight;
+        if !(0.0..=MAX_POINT_WEIGHT).contains(&point_weight) {
+            bail!(
+                "--point-weight {point_weight}: expected a screening weight in [0, {MAX_POINT_WEIGHT}]"
+            );
+        }
         let run = RunConfig::new(&a.common)?;
         let error = a.error;
         if !(error >= 0.0 && error.is_finite()) {
@@ -411,6 +422,7 @@ impl ReconstructConfig {
         params.min_points = a.min_points;
         params.trim = a.trim;
         params.sigma_vox = smooth;
+        params.point_weight = point_weight;
         params.fit = !a.no_fit;
         params.gpu = a.gpu.into();
         let hex = match a.hex {

@@ -60,8 +60,17 @@ pub fn ingest(st: &IngestStats, out: &Path) {
 
 /// `reconstruct`'s line.
 pub fn reconstruct(st: &ReconStats, out: &Path) {
+    let screened = if st.point_weight > 0.0 && st.leaves_solved > 0 {
+        format!(
+            ", screened with --point-weight {}: {:.1} CG iterations a leaf",
+            st.point_weight,
+            st.leaf_iterations as f64 / st.leaves_solved as f64
+        )
+    } else {
+        String::new()
+    };
     outln!(
-        "reconstructed {} vertices, {} triangles into {} in {:.2} s ({} leaves, {} refined, iso {:.4}), peak memory {}",
+        "reconstructed {} vertices, {} triangles into {} in {:.2} s ({} leaves, {} refined{screened}, iso {:.4}), peak memory {}",
         st.vertices,
         st.faces,
         out.display(),

@@ -8,7 +8,7 @@ use crate::types::{Cube, GridGeom, TileMesh};
 
 /// One global FFT solve over the whole cube at `depth`, extracted as a single tile: the
 /// reference the two-level adaptive solve is measured against at depths where `(2^depth)³`
-/// nodes fit in memory. The periodic grid is padded by an eighth of the cube on each side
+/// nodes fit in memory, screened with weight `point_weight` as `reconstruct` screens. The periodic grid is padded by an eighth of the cube on each side
 /// (the coarse solve of `reconstruct` pads at least 4 coarse voxels).
 ///
 /// Errors: those of [`marching_cubes`] (a grid too large for 32-bit edge counts).
@@ -18,8 +18,9 @@ pub fn global_solve(
     cube: &Cube,
     depth: u32,
     sigma_vox: f64,
+    point_weight: f64,
 ) -> Result<TileMesh> {
-    let g = global_field(pos, nrm, cube, depth, sigma_vox);
+    let g = global_field(pos, nrm, cube, depth, sigma_vox, point_weight);
     let geom = GridGeom {
         origin: cube.origin,
         h: g.spacing,

@@ -20,8 +20,8 @@ use crate::exec::budget::{Permit, Share};
 use crate::recon::checkpoint::{leaf_path, read_leaf, write_leaf};
 use crate::recon::pou::unit_for;
 use crate::recon::{
-    CoarseField, DEFAULT_ERROR, DEFAULT_MIN_POINTS, LeafRule, LeafSolvers, Moments, Plan,
-    fft_solve, refine_leaf, solve_coarse,
+    CoarseField, DEFAULT_ERROR, DEFAULT_MIN_POINTS, DEFAULT_POINT_WEIGHT, LeafRule, LeafSolvers,
+    Moments, Plan, fft_solve, refine_leaf, screen::ScreenBuilder, solve_coarse,
 };
 use crate::store::Store;
 use crate::surface::Support;
@@ -45,6 +45,8 @@ pub struct ReconParams {
     pub depth: u32,
     /// Gaussian smoothing width, in voxels of each grid.
     pub sigma_vox: f64,
+    /// Screening weight α (`--point-weight`; 0: unscreened), see [`crate::recon::screen`].
+    pub point_weight: f64,
     /// Tile edge in fine voxels (`None`: 64, at least one leaf, at most the cube).
     pub tile_voxels: Option<u64>,
     /// Work directory (leaf checkpoints, run description).
@@ -73,6 +75,7 @@ impl ReconParams {
         ReconParams {
             depth,
             sigma_vox: 1.0,
+            point_weight: DEFAULT_POINT_WEIGHT,
             fit: true,
             tile_voxels: None,
             work_dir,
@@ -102,6 +105,15 @@ pub struct ReconStats {
     pub tiles: usize,
     /// Iso-value.
     pub iso: f64,
+    /// Screening weight α (0: unscreened).
+    pub point_weight: f64,
+    /// Conjugate-gradient iterations of the screened coarse solve.
+    pub coarse_iterations: u32,
+    /// Leaves whose fine solve ran in this run (refined and not reused).
+    pub leaves_solved: usize,
+    /// Conjugate-gradient iterations of the leaves' screened fine solves, summed over the
+    /// leaves solved in this run.
+    pub leaf_iterations: u64,
     /// Leaf edge in fine voxels.
     pub leaf_voxels: u64,
     /// Fine voxels per coarse voxel.
@@ -158,6 +170,10 @@ pub fn reconstruct(
         leaves_reused: leaves.reused,
         tiles: ts.tiles,
         iso: leaves.iso,
+        point_weight: plan.point_weight,
+        coarse_iterations: coarse.iterations,
+        leaves_solved: leaves.solved,
+        leaf_iterations: leaves.iterations,
         leaf_voxels: plan.leaf_voxels,
         coarse_ratio: plan.coarse_ratio,
         tile_voxels: plan.tile,
@@ -188,6 +204,7 @@ fn plan_run(store: &Store, params: &ReconParams, ctx: &Ctx) -> Result<Plan> {
         m.cube,
         params.depth,
         params.sigma_vox,
+        params.point_weight,
         params.tile_voxels,
         ctx.budget.share(Share::CoarseGrid),
     )
@@ -200,6 +217,7 @@ struct CoarsePass {
     _permit: Permit,
     occupied: BTreeSet<CellKey>,
     support: Support,
+    iterations: u32,
 }
 
 /// Pass 1: splat every point into the coarse grid; collect occupied leaf cells, the coarse
@@ -209,7 +227,7 @@ fn coarse_pass(store: &Store, plan: &Plan, ctx: &Ctx) -> Result<CoarsePass> {
     let cgrid = plan.coarse_grid();
     let permit = ctx
         .budget
-        .acquire_now(cgrid.scratch_bytes(), "the coarse global solve")?;
+        .acquire_now(plan.coarse_scratch_bytes(), "the coarse global solve")?;
     let stage = ctx.progress.stage("splat", Some(m.point_count), "points");
     let mut v = vec![[0f32; 3]; cgrid.len()];
     let mut occupied = BTreeSet::new();
@@ -217,6 +235,11 @@ fn coarse_pass(store: &Store, plan: &Plan, ctx: &Ctx) -> Result<CoarsePass> {
     let origin = plan.cube.origin;
     let mut support = Support::new([0.0; 3], plan.coarse_spacing(), plan.coarse_cells());
     let mut moments = Moments::new(m.bounds.min);
+    // The samples aggregated per coarse voxel for the screening: one entry per occupied coarse
+    // voxel, admitted as it grows.
+    let screened = plan.point_weight > 0.0;
+    let mut screen = ScreenBuilder::new(&cgrid);
+    let mut screen_permit: Option<Permit> = None;
     let wave = 2 * ctx.threads();
     let ncells = m.cells.len();
     let mut i = 0;
@@ -234,6 +257,17 @@ fn coarse_pass(store: &Store, plan: &Plan, ctx: &Ctx) -> Result<CoarsePass> {
         for b in batches {
             let b = b?;
             fft_solve::splat(&cgrid, &b.pos, &b.normal, &mut v);
+            if screened {
+                screen.add(&b.pos);
+                let held = screen_permit.as_ref().map_or(0, |p| p.bytes());
+                if screen.bytes() > held {
+                    // Doubled ahead, as the map grows.
+                    screen_permit = Some(ctx.budget.acquire_now(
+                        2 * screen.bytes(),
+                        "the screening samples of the coarse solve",
+                    )?);
+                }
+            }
             for p in &b.pos {
                 support.mark([0, 1, 2].map(|a| p[a] - origin[a]));
                 occupied.insert(CellKey::new(
@@ -249,13 +283,17 @@ fn coarse_pass(store: &Store, plan: &Plan, ctx: &Ctx) -> Result<CoarsePass> {
     stage.finish(None);
     moments.check_not_flat(&store.dir)?;
     let stage = ctx.progress.stage("coarse", None, "solves");
-    let field = ctx.pool.install(|| solve_coarse(plan, v));
+    let screen = screen.finish(plan.point_weight);
+    let (field, conv) = ctx.pool.install(|| solve_coarse(plan, v, &screen));
+    drop(screen);
+    drop(screen_permit);
     stage.finish(None);
     Ok(CoarsePass {
         field,
         _permit: permit,
         occupied,
         support,
+        iterations: conv.iterations,
     })
 }
 
@@ -267,10 +305,13 @@ struct LeafPass {
     reused: usize,
     iso: f64,
     unit: f32,
+    solved: usize,
+    iterations: u64,
 }
 
-/// One leaf's result: its iso sum and count, whether it was read back, whether it is refined.
-type LeafOutcome = (f64, u64, bool, bool);
+/// One leaf's result: its iso sum and count, whether it was read back, whether it is refined,
+/// its screened solve's iterations.
+type LeafOutcome = (f64, u64, bool, bool, u32);
 
 /// Pass 2: the occupied leaves of the coarse pass (taken from it), in Morton order, solved
 /// in parallel waves, spilled to the work directory. Leaves a resumed run checkpointed
@@ -291,6 +332,7 @@ fn leaf_pass(
         .progress
         .stage("leaves", Some(leaves.len() as u64), "leaves");
     let (mut iso_sum, mut iso_count, mut reused) = (0.0, 0u64, 0);
+    let (mut solved, mut iterations) = (0, 0u64);
     let mut refined = BTreeSet::new();
     let rule = LeafRule {
         tolerance: params.error * store.manifest.bounds.diagonal(),
@@ -350,19 +392,27 @@ fn leaf_pass(
                     .map(|(k, pts)| match pts {
                         None => {
                             let d = read_leaf(&dirs.leaves, *k, dm)?;
-                            Ok((d.iso_sum, d.iso_count, true, d.detail.is_some()))
+                            Ok((d.iso_sum, d.iso_count, true, d.detail.is_some(), 0))
                         }
                         Some(p) => {
                             let d = refine_leaf(plan, unit, &solvers, *k, p, coarse, &rule);
                             write_leaf(&dirs.leaves, *k, &d)?;
-                            Ok((d.iso_sum, d.iso_count, false, d.detail.is_some()))
+                            Ok((
+                                d.iso_sum,
+                                d.iso_count,
+                                false,
+                                d.detail.is_some(),
+                                d.iterations,
+                            ))
                         }
                     })
                     .collect::<Vec<_>>()
             }));
         }
         for (r, k) in res.into_iter().zip(wave_keys) {
-            let (s, c, was_reused, is_refined) = r?;
+            let (s, c, was_reused, is_refined, its) = r?;
+            iterations += its as u64;
+            solved += (is_refined && !was_reused) as usize;
             iso_sum += s;
             iso_count += c;
             reused += was_reused as usize;
@@ -392,5 +442,7 @@ fn leaf_pass(
         reused,
         iso,
         unit,
+        solved,
+        iterations,
     })
 }

@@ -115,6 +115,7 @@ impl RunIdentity {
             ("command", "reconstruct".to_string()),
             ("--depth", params.depth.to_string()),
             ("--smooth", params.sigma_vox.to_string()),
+            ("--point-weight", params.point_weight.to_string()),
             ("--error", params.error.to_string()),
             ("--min-points", params.min_points.to_string()),
             ("--trim", params.trim.to_string()),

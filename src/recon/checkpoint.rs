@@ -104,6 +104,7 @@ pub fn read_leaf(dir: &Path, key: CellKey, m: usize) -> Result<LeafDetail> {
         detail,
         iso_sum: f64::from_bits(u64_at(16)),
         iso_count: u64_at(24),
+        iterations: 0,
     })
 }
 
@@ -246,6 +247,7 @@ mod tests {
             detail: Some(quantise_detail(&raw, 1.0 / 64.0)),
             iso_sum: -12.5,
             iso_count: 7,
+            iterations: 0,
         };
         write_leaf(dir.path(), key, &refined).unwrap();
         let back = read_leaf(dir.path(), key, m).unwrap();
@@ -261,6 +263,7 @@ mod tests {
             detail: None,
             iso_sum: 1.0,
             iso_count: 2,
+            iterations: 0,
         };
         write_leaf(dir.path(), plain, &coarse).unwrap();
         assert!(read_leaf(dir.path(), plain, m).unwrap().detail.is_none());

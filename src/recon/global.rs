@@ -25,13 +25,15 @@ pub struct GlobalField {
 }
 
 /// Solve the points `pos` with normals `nrm` on one periodic grid of `2^depth` voxels across
-/// `cube`, padded by an eighth of the cube (at least 2 voxels) on each side.
+/// `cube`, padded by an eighth of the cube (at least 2 voxels) on each side, screened with
+/// weight `point_weight` (0: unscreened).
 pub fn global_field(
     pos: &[[f64; 3]],
     nrm: &[[f32; 3]],
     cube: &Cube,
     depth: u32,
     sigma_vox: f64,
+    point_weight: f64,
 ) -> GlobalField {
     let n = 1usize << depth;
     let pad = global_pad(n);
@@ -42,7 +44,8 @@ pub fn global_field(
         origin: cube.origin.map(|o| o - pad as f64 * h),
         unit: cube.size,
     };
-    let f = fft_solve::solve(&grid, pos, nrm, sigma_vox);
+    let (f, _) =
+        fft_solve::Solver::new(&grid, sigma_vox).solve_points(&grid, pos, nrm, point_weight);
     let iso = pos.iter().map(|p| grid.eval(&f, *p)).sum::<f64>() / pos.len().max(1) as f64;
     let m = n + 1;
     let mut values = Vec::with_capacity(m * m * m);

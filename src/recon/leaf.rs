@@ -28,6 +28,9 @@ pub struct LeafDetail {
     pub iso_sum: f64,
     /// Number of the cell's samples.
     pub iso_count: u64,
+    /// Conjugate-gradient iterations of the leaf's screened fine solve (0 for a leaf left to
+    /// the coarse solution, or read back from a checkpoint).
+    pub iterations: u32,
 }
 
 /// The two solvers every leaf uses: its fine grid and its coarse local grid.
@@ -69,8 +72,11 @@ pub fn solve_leaf(
 ) -> LeafDetail {
     let fine = plan.leaf_fine_grid(key);
     let coarse_local = leaf_coarse_grid(plan, &fine);
-    let f = solvers.fine.solve(&fine, &pts.pos, &pts.nrm);
-    let c = solvers.coarse.solve(&coarse_local, &pts.pos, &pts.nrm);
+    let alpha = plan.point_weight;
+    let (f, conv) = solvers.fine.solve_points(&fine, &pts.pos, &pts.nrm, alpha);
+    let (c, _) = solvers
+        .coarse
+        .solve_points(&coarse_local, &pts.pos, &pts.nrm, alpha);
     let m = plan.detail_n();
     let nc = coarse_local.n;
     // Per axis, detail node s sits on fine node q = E/2 − ov + s, between coarse nodes
@@ -113,6 +119,7 @@ pub fn solve_leaf(
         detail: Some(quantise_detail(&detail, unit)),
         iso_sum,
         iso_count: pts.own as u64,
+        iterations: conv.iterations,
     }
 }
 
@@ -155,5 +162,6 @@ pub fn coarse_only(pts: &LeafPoints, coarse: &CoarseField) -> LeafDetail {
         detail: None,
         iso_sum: pts.pos[..pts.own].iter().map(|p| coarse.eval(*p)).sum(),
         iso_count: pts.own as u64,
+        iterations: 0,
     }
 }

@@ -35,6 +35,16 @@
 //! 4. The iso-value is the mean of the field at the input samples (each leaf sums its own
 //!    cell's samples). With outward normals the field is lower inside.
 //!
+//! Every solve of the scheme, the coarse global one and both of each leaf, is **screened**
+//! (Kazhdan & Hoppe 2013, [`screen`]) with the weight `--point-weight` relative to its own
+//! grid: the samples aggregated per voxel of that grid pull the field to one value, which
+//! restores the short wavelengths the Gaussian and the splat attenuate (about
+//! `exp(−2π²σ²/λ²)` for a wavelength of `λ` voxels). The coarse global solve aggregates the
+//! samples as the splat pass streams them, one entry per occupied coarse voxel; a leaf
+//! aggregates its own points on each of its two grids. The detail is still the fine minus the
+//! coarse local solution, both screened, so the blend keeps matching one global solve screened
+//! the same way (the test `two_level_matches_one_global_solve` checks both).
+//!
 //! **Grid conventions** (written once, here; [`plan`]). The cube is the store's root cube (the
 //! bounding box enlarged 10%, PoissonRecon's `--scale 1.1`). Depth `D` gives `N = 2^D` cells
 //! per edge and spacing `h = size/N`; fine node `g = (i, j, k)`, `0 <= g <= N`, sits at
@@ -56,12 +66,13 @@ pub mod global;
 pub mod leaf;
 pub mod plan;
 pub mod pou;
+pub mod screen;
 
 pub use blend::{leaves_near, tile_blend};
 pub use coarse::{CoarseField, Moments};
 pub use global::{GlobalField, global_field};
 pub use leaf::{LeafDetail, LeafPoints, LeafSolvers, coarse_error, coarse_only, solve_leaf};
-pub use plan::{DEFAULT_ERROR, DEFAULT_MIN_POINTS, DEPTHS, Plan};
+pub use plan::{DEFAULT_ERROR, DEFAULT_MIN_POINTS, DEFAULT_POINT_WEIGHT, DEPTHS, Plan};
 
 use crate::types::CellKey;
 
@@ -96,11 +107,15 @@ pub fn refine_leaf(
 }
 
 /// Step 1's solve: the coarse global solution from the normals splatted on `plan`'s coarse
-/// grid ([`fft_solve::splat`]), smoothed by `plan.sigma_vox` coarse voxels.
-pub fn solve_coarse(plan: &Plan, splatted: Vec<[f32; 3]>) -> CoarseField {
+/// grid ([`fft_solve::splat`]), smoothed by `plan.sigma_vox` coarse voxels and screened by
+/// `screen` (the samples aggregated on the coarse grid, [`screen::ScreenBuilder`]).
+pub fn solve_coarse(
+    plan: &Plan,
+    splatted: Vec<[f32; 3]>,
+    screen: &screen::Screen,
+) -> (CoarseField, fft_solve::Convergence) {
     let grid = plan.coarse_grid();
-    CoarseField::new(
-        plan,
-        fft_solve::solve_splatted(&grid, splatted, plan.sigma_vox),
-    )
+    let (values, conv) =
+        fft_solve::Solver::new(&grid, plan.sigma_vox).solve_screened(&grid, splatted, screen);
+    (CoarseField::new(plan, values), conv)
 }

@@ -10,6 +10,10 @@ use crate::types::{CellKey, Cube};
 /// Peak bytes per node of a solve: the splatted normals (12) and the divergence (4).
 pub const COARSE_BYTES_PER_NODE: u64 = 16;
 
+/// Peak bytes per node of a screened solve: the conjugate gradients' five vectors (20) and
+/// the preconditioner's transform (8) ([`crate::recon::fft_solve::Solver::solve_screened`]).
+pub const SCREENED_BYTES_PER_NODE: u64 = 28;
+
 /// Coarse voxels added to the cube's width before rounding up to a 5-smooth size: 4 on each
 /// side, so that the periodic coarse solve never wraps the surface.
 const COARSE_PAD_VOXELS: u64 = 8;
@@ -31,6 +35,9 @@ pub const DEPTHS: std::ops::RangeInclusive<u32> = 5..=13;
 /// the noise of real scans (which are then refined everywhere, as a global solve would be),
 /// above the error of the coarse solve on smooth, clean surfaces (which are then left coarse).
 pub const DEFAULT_ERROR: f64 = 2e-5;
+
+/// Default `--point-weight`, the screening weight α ([`crate::recon::screen`]).
+pub const DEFAULT_POINT_WEIGHT: f64 = 4.0;
 
 /// Default `--min-points`: a leaf needs this many samples in its cell to be refined. A fixed
 /// count, not a share of the input (the paper's 0.5% suits 10⁵ points, not 10⁹): the detail
@@ -93,6 +100,10 @@ pub struct Plan {
     pub tile_level: u32,
     /// Smoothing width in voxels.
     pub sigma_vox: f64,
+    /// Screening weight α (`--point-weight`; 0: the unscreened solve), see
+    /// [`crate::recon::screen`].
+    #[serde(default)]
+    pub point_weight: f64,
 }
 
 impl Plan {
@@ -103,6 +114,7 @@ impl Plan {
         cube: Cube,
         depth: u32,
         sigma_vox: f64,
+        point_weight: f64,
         tile: Option<u64>,
         coarse_budget_bytes: u64,
     ) -> Result<Plan> {
@@ -114,11 +126,16 @@ impl Plan {
             )));
         }
         let n = 1u64 << depth;
+        let per_node = if point_weight > 0.0 {
+            SCREENED_BYTES_PER_NODE
+        } else {
+            COARSE_BYTES_PER_NODE
+        };
         let mut r = MIN_COARSE_RATIO;
         loop {
             let e = LEAF_COARSE_VOXELS * r;
             let nc = smooth_size(n / r + COARSE_PAD_VOXELS);
-            let coarse_bytes = nc * nc * nc * COARSE_BYTES_PER_NODE;
+            let coarse_bytes = nc * nc * nc * per_node;
             if e >= n || coarse_bytes <= coarse_budget_bytes {
                 break;
             }
@@ -143,6 +160,7 @@ impl Plan {
             tile,
             tile_level: depth - tile.trailing_zeros(),
             sigma_vox,
+            point_weight,
         })
     }
 
@@ -203,7 +221,12 @@ impl Plan {
             origin: [0.0; 3],
             unit: self.cube.size,
         }
-        .scratch_bytes()
+        .solve_bytes(self.point_weight > 0.0)
+    }
+
+    /// Scratch bytes of the coarse global solve.
+    pub fn coarse_scratch_bytes(&self) -> u64 {
+        self.coarse_grid().solve_bytes(self.point_weight > 0.0)
     }
 
     /// World position of fine node `g`.

@@ -62,6 +62,8 @@ fn options_are_checked_before_any_work() {
         (&["--depth", "30"][..], "--depth 30"),
         (&["--smooth", "9"][..], "--smooth 9"),
         (&["--error=-1"][..], "--error -1"),
+        (&["--point-weight=-1"][..], "--point-weight -1"),
+        (&["--pointWeight", "100"][..], "--point-weight 100"),
         (
             &["--viewpoint", "1,2,3", "--viewpoint", "4,5,6"][..],
             "--viewpoint given 2 times",

@@ -1219,7 +1219,7 @@ fn option_cases(c: &mut Corpus) {
         "good.xyz",
         "0 0 0\n1 0 0\n0 1 0\n0 0 1\n".as_bytes(),
     );
-    let cases: [(&str, &str, &[&str], &str); 14] = [
+    let cases: [(&str, &str, &[&str], &str); 15] = [
         ("opt_depth_low", "o.ply", &["--depth", "2"], "--depth 2"),
         ("opt_depth_high", "o.ply", &["--depth", "14"], "--depth 14"),
         (
@@ -1239,6 +1239,12 @@ fn option_cases(c: &mut Corpus) {
         ("opt_mem_zero", "o.ply", &["--mem", "0"], "--mem"),
         ("opt_smooth_neg", "o.ply", &["--smooth=-1"], "--smooth"),
         ("opt_error_nan", "o.ply", &["--error", "NaN"], "--error"),
+        (
+            "opt_point_weight_nan",
+            "o.ply",
+            &["--point-weight", "NaN"],
+            "--point-weight",
+        ),
         (
             "opt_viewpoint_two",
             "o.ply",
