@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Fine relief, with and without noise: scanflow reconstruct (screened with the vertex fit, the
-# default; unscreened, --point-weight 0; and screened with --no-fit) against PoissonRecon (screened, pymeshlab) and Open3D's Poisson on the same points, same
+# default, whose --point-weight auto follows the measured noise: the fit_*.log files give the
+# weight; unscreened, --point-weight 0; and screened with --no-fit) against PoissonRecon (screened, pymeshlab) and Open3D's Poisson on the same points, same
 # depth, same run (scripts/poisson_peer.py). A sphere of radius 1 carries the relief
 # 1 + a sin(k x) sin(k y) sin(k z) (`scanflow synth bumpy --amplitude a --frequency k`); its
 # wavelength 2π/k is WAVES voxels at DEPTH (a voxel is 1.1 × the bounding box over 2^DEPTH,

@@ -25,6 +25,8 @@ samples are the same points for every output):
   the reference's edge (over a hole, or past the rim); anywhere else the reference is there to
   compare with. The same rule, with the same reference, for every output; the kept fraction is
   printed. (Unrestricted out->ref is printed too, for information.)
+- points->out: every input point (the raw scans, posed), to the output mesh: how closely the
+  surface follows the data it was made from, with no reference involved.
 - two-sided: the mean of the two directions' means (and RMS of both directions' samples pooled
   equally). Target: ours two-sided mean <= the peer's. Also printed: per-direction ratios,
   whether RMS, p95 and max are no worse too, and ours' ref->out tail (reference samples farther
@@ -138,16 +140,18 @@ def topology(v, f):
                 oriented=oriented, outward=volume > 0, volume=volume)
 
 
-def measure(ref, path, n):
+def measure(ref, path, n, pts):
     v, f = read_mesh(path)
     out_scene = scene_of(v, f)
+    p2o = out_scene.compute_distance(o3d.core.Tensor(pts.astype(np.float32))).numpy()
     rs = sample(ref.v, ref.f, n, seed=1)
     r2o = out_scene.compute_distance(o3d.core.Tensor(rs.astype(np.float32))).numpy()
     os_ = sample(v, f, n, seed=2)
     c, tri, o2r = ref.closest(os_)
     keep = ~ref.on_boundary(c, tri, 1e-6 * ref.diag)
     res = dict(ref_to_out=stats(r2o, ref.diag), out_to_ref=stats(o2r[keep], ref.diag),
-               out_to_ref_all=stats(o2r, ref.diag), kept=float(keep.mean()))
+               out_to_ref_all=stats(o2r, ref.diag), kept=float(keep.mean()),
+               points_to_out=stats(p2o, ref.diag))
     a, b = res["ref_to_out"], res["out_to_ref"]
     far = r2o / ref.diag > 2e-3
     res["worst"] = dict(n=int(far.sum()), share=float(far.mean()),
@@ -217,11 +221,12 @@ def main():
         print(line)
 
     rows = []
+    pts = load_scans(a.conf)[0]
     for r in a.run:
         label, mesh, timefile = r[:3]
         stages = json.loads(open(r[3]).read().strip().splitlines()[-1]) if len(r) == 4 else None
         rows.append(dict(label=label, mesh=mesh, time=read_time(timefile), stages=stages,
-                         m=measure(ref, mesh, a.samples)))
+                         m=measure(ref, mesh, a.samples, pts)))
 
     print(f"\ndistances relative to the reference diagonal, {a.samples} samples per mesh; "
           "out->ref only where the reference exists (see the header of this script)")
@@ -229,7 +234,8 @@ def main():
     print(h)
     for row in rows:
         m = row["m"]
-        for key, name in (("ref_to_out", "ref->out"), ("out_to_ref", "out->ref"), ("out_to_ref_all", "(all)")):
+        for key, name in (("ref_to_out", "ref->out"), ("out_to_ref", "out->ref"), ("out_to_ref_all", "(all)"),
+                          ("points_to_out", "pts->out")):
             s = m[key]
             print(f"{row['label']:16} {name:8} {s['mean']:9.3e} {s['rms']:9.3e} {s['p95']:9.3e} {s['max']:9.3e}")
         t = m["two_sided"]
@@ -258,7 +264,7 @@ def main():
         r = lambda k, d="mean": o[k][d] / p[k][d]  # noqa: E731
         line = (f"ratio {ours['label']}/{peer['label']}: two-sided mean {r('two_sided'):.2f}, rms "
                 f"{r('two_sided', 'rms'):.2f}; ref->out mean {r('ref_to_out'):.2f}; out->ref mean "
-                f"{r('out_to_ref'):.2f}; wall {ours['time']['wall'] / peer['time']['wall']:.2f}")
+                f"{r('out_to_ref'):.2f}; input points->out mean {r('points_to_out'):.2f}; wall {ours['time']['wall'] / peer['time']['wall']:.2f}")
         if peer["stages"]:
             line += f" (vs its normals+orient+poisson only: {ours['time']['wall'] / peer['stages']['pipeline_s']:.2f})"
         line += f"; peak memory {ours['time']['kib'] / peer['time']['kib']:.2f}"

@@ -553,10 +553,11 @@ pub struct ReconstructArgs {
     pub smooth: f64,
     /// Screening weight α of the screened Poisson solve (Kazhdan & Hoppe 2013): how
     /// strongly the surface is pulled through the samples against the smoothed normals, in
-    /// [0, 64]; 0 solves the unscreened equation. PoissonRecon's `--pointWeight` (also
-    /// accepted), with its scaling by depth.
-    #[arg(long, alias = "pointWeight", default_value_t = scanflow::recon::DEFAULT_POINT_WEIGHT)]
-    pub point_weight: f64,
+    /// [0, 64]; 0 solves the unscreened equation. `auto` measures the samples' noise and
+    /// takes 4 (PoissonRecon's default) for typical scans, up to 32 for precise samples.
+    /// PoissonRecon's `--pointWeight` (also accepted), with its scaling by depth.
+    #[arg(long, alias = "pointWeight", default_value = "auto")]
+    pub point_weight: String,
     /// Keep the vertices where marching cubes put them, instead of moving each onto the
     /// plane (or, where they are curved, the quadratic jet) of its nearest input points (by
     /// what exceeds the fit's standard error).

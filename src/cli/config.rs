@@ -11,7 +11,7 @@ use scanflow::exec::{Ctx, default_mem_bytes, parse_mem};
 use scanflow::normals::{NormalParams, NormalsMode};
 use scanflow::pipeline::ReconParams;
 use scanflow::pipeline::ingest::IngestParams;
-use scanflow::recon::DEPTHS;
+use scanflow::recon::{DEPTHS, PointWeight};
 use scanflow::synth::{BUMPY_RELIEF, Shape};
 
 use super::args::{
@@ -376,12 +376,15 @@ impl ReconstructConfig {
         if !(smooth > 0.0 && smooth <= MAX_SMOOTH_VOXELS) {
             bail!("--smooth {smooth}: expected a width in voxels in (0, {MAX_SMOOTH_VOXELS}]");
         }
-        let point_weight = a.point_weight;
-        if !(0.0..=MAX_POINT_WEIGHT).contains(&point_weight) {
-            bail!(
-                "--point-weight {point_weight}: expected a screening weight in [0, {MAX_POINT_WEIGHT}]"
-            );
-        }
+        let point_weight = match a.point_weight.as_str() {
+            "auto" => PointWeight::Auto,
+            w => match w.parse::<f64>() {
+                Ok(a) if (0.0..=MAX_POINT_WEIGHT).contains(&a) => PointWeight::Fixed(a),
+                _ => bail!(
+                    "--point-weight {w}: expected auto or a screening weight in [0, {MAX_POINT_WEIGHT}]"
+                ),
+            },
+        };
         let run = RunConfig::new(&a.common)?;
         let error = a.error;
         if !(error >= 0.0 && error.is_finite()) {

@@ -60,9 +60,13 @@ pub fn ingest(st: &IngestStats, out: &Path) {
 
 /// `reconstruct`'s line.
 pub fn reconstruct(st: &ReconStats, out: &Path) {
+    let noise = st
+        .noise_voxels
+        .map(|s| format!(" (noise {s:.3} voxel)"))
+        .unwrap_or_default();
     let screened = if st.point_weight > 0.0 && st.leaves_solved > 0 {
         format!(
-            ", screened with --point-weight {}: {:.1} CG iterations a leaf",
+            ", screened with --point-weight {}{noise}: {:.1} CG iterations a leaf",
             st.point_weight,
             st.leaf_iterations as f64 / st.leaves_solved as f64
         )

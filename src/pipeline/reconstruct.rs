@@ -20,8 +20,10 @@ use crate::exec::budget::{Permit, Share};
 use crate::recon::checkpoint::{leaf_path, read_leaf, write_leaf};
 use crate::recon::pou::unit_for;
 use crate::recon::{
-    CoarseField, DEFAULT_ERROR, DEFAULT_MIN_POINTS, DEFAULT_POINT_WEIGHT, LeafRule, LeafSolvers,
-    Moments, Plan, fft_solve, refine_leaf, screen::ScreenBuilder, solve_coarse,
+    CoarseField, DEFAULT_ERROR, DEFAULT_MIN_POINTS, LeafRule, LeafSolvers, Moments, Plan,
+    PointWeight, fft_solve, refine_leaf,
+    screen::{self, NOISE_KEY_BYTES, NoiseStats, ScreenBuilder},
+    solve_coarse,
 };
 use crate::store::Store;
 use crate::surface::Support;
@@ -45,8 +47,9 @@ pub struct ReconParams {
     pub depth: u32,
     /// Gaussian smoothing width, in voxels of each grid.
     pub sigma_vox: f64,
-    /// Screening weight α (`--point-weight`; 0: unscreened), see [`crate::recon::screen`].
-    pub point_weight: f64,
+    /// Screening weight α (`--point-weight`: `auto` from the samples' noise, or a fixed α, 0:
+    /// unscreened), see [`crate::recon::screen`].
+    pub point_weight: PointWeight,
     /// Tile edge in fine voxels (`None`: 64, at least one leaf, at most the cube).
     pub tile_voxels: Option<u64>,
     /// Work directory (leaf checkpoints, run description).
@@ -75,7 +78,7 @@ impl ReconParams {
         ReconParams {
             depth,
             sigma_vox: 1.0,
-            point_weight: DEFAULT_POINT_WEIGHT,
+            point_weight: PointWeight::Auto,
             fit: true,
             tile_voxels: None,
             work_dir,
@@ -105,8 +108,11 @@ pub struct ReconStats {
     pub tiles: usize,
     /// Iso-value.
     pub iso: f64,
-    /// Screening weight α (0: unscreened).
+    /// Screening weight α the solves used (0: unscreened).
     pub point_weight: f64,
+    /// The samples' spread across the surface in fine voxels, where one could be measured
+    /// ([`crate::recon::screen::NoiseStats`]).
+    pub noise_voxels: Option<f64>,
     /// Conjugate-gradient iterations of the screened coarse solve.
     pub coarse_iterations: u32,
     /// Leaves whose fine solve ran in this run (refined and not reused).
@@ -134,9 +140,12 @@ pub fn reconstruct(
     ctx: &Ctx,
 ) -> Result<ReconStats> {
     let t0 = Instant::now();
-    let plan = plan_run(store, params, ctx)?;
+    let mut plan = plan_run(store, params, ctx)?;
     let dirs = workdir::prepare(store, &plan, params)?;
-    let mut coarse = coarse_pass(store, &plan, ctx)?;
+    let mut coarse = coarse_pass(store, &plan, params.point_weight, ctx)?;
+    // The weight the coarse solve used, for every leaf (`auto` measures it there).
+    plan.point_weight = coarse.point_weight;
+    plan.noise_voxels = coarse.noise_voxels;
     let point_cap = ctx
         .budget
         .share(Share::PointCache)
@@ -171,6 +180,7 @@ pub fn reconstruct(
         tiles: ts.tiles,
         iso: leaves.iso,
         point_weight: plan.point_weight,
+        noise_voxels: coarse.noise_voxels,
         coarse_iterations: coarse.iterations,
         leaves_solved: leaves.solved,
         leaf_iterations: leaves.iterations,
@@ -204,7 +214,12 @@ fn plan_run(store: &Store, params: &ReconParams, ctx: &Ctx) -> Result<Plan> {
         m.cube,
         params.depth,
         params.sigma_vox,
-        params.point_weight,
+        // `auto` is at least the base weight: the grids are sized for a screened solve, and
+        // the coarse pass sets the weight.
+        match params.point_weight {
+            PointWeight::Auto => screen::BASE_POINT_WEIGHT,
+            PointWeight::Fixed(a) => a,
+        },
         params.tile_voxels,
         ctx.budget.share(Share::CoarseGrid),
     )
@@ -218,11 +233,15 @@ struct CoarsePass {
     occupied: BTreeSet<CellKey>,
     support: Support,
     iterations: u32,
+    /// The screening weight of the run (`auto`'s choice, or the one given).
+    point_weight: f64,
+    /// The samples' spread across the surface, where one could be measured.
+    noise_voxels: Option<f64>,
 }
 
 /// Pass 1: splat every point into the coarse grid; collect occupied leaf cells, the coarse
 /// voxels holding points, and the moments that refuse planar and linear inputs; solve.
-fn coarse_pass(store: &Store, plan: &Plan, ctx: &Ctx) -> Result<CoarsePass> {
+fn coarse_pass(store: &Store, plan: &Plan, weight: PointWeight, ctx: &Ctx) -> Result<CoarsePass> {
     let m = &store.manifest;
     let cgrid = plan.coarse_grid();
     let permit = ctx
@@ -238,6 +257,7 @@ fn coarse_pass(store: &Store, plan: &Plan, ctx: &Ctx) -> Result<CoarsePass> {
     // The samples aggregated per coarse voxel for the screening: one entry per occupied coarse
     // voxel, admitted as it grows.
     let screened = plan.point_weight > 0.0;
+    let mut noise = NoiseStats::default();
     let mut screen = ScreenBuilder::new(&cgrid);
     let mut screen_permit: Option<Permit> = None;
     let wave = 2 * ctx.threads();
@@ -247,15 +267,24 @@ fn coarse_pass(store: &Store, plan: &Plan, ctx: &Ctx) -> Result<CoarsePass> {
         let ids: Vec<usize> = (i..(i + wave).min(ncells)).collect();
         let bytes: u64 = ids
             .iter()
-            .map(|&j| m.cells[j].count * BATCH_POINT_BYTES)
+            .map(|&j| m.cells[j].count * (BATCH_POINT_BYTES + NOISE_KEY_BYTES))
             .sum();
         // The coarse grid's permit is held: admitted without waiting (see `tiles::admit_now`).
         let _permit = tiles::admit_now(ctx, bytes);
-        let batches: Vec<Result<PointBatch>> = ctx
-            .pool
-            .install(|| ids.par_iter().map(|&j| store.read_cell(j)).collect());
+        // Each cell's noise statistics beside its read (for `auto` and the vertex fit);
+        // pooled below in cell order.
+        let batches: Vec<Result<(PointBatch, NoiseStats)>> = ctx.pool.install(|| {
+            ids.par_iter()
+                .map(|&j| {
+                    let b = store.read_cell(j)?;
+                    let st = NoiseStats::of(&b.pos, &b.normal, plan.cube.origin, plan.spacing);
+                    Ok((b, st))
+                })
+                .collect()
+        });
         for b in batches {
-            let b = b?;
+            let (b, st) = b?;
+            noise.add(st);
             fft_solve::splat(&cgrid, &b.pos, &b.normal, &mut v);
             if screened {
                 screen.add(&b.pos);
@@ -283,7 +312,12 @@ fn coarse_pass(store: &Store, plan: &Plan, ctx: &Ctx) -> Result<CoarsePass> {
     stage.finish(None);
     moments.check_not_flat(&store.dir)?;
     let stage = ctx.progress.stage("coarse", None, "solves");
-    let screen = screen.finish(plan.point_weight);
+    let noise_voxels = noise.sigma_voxels();
+    let point_weight = match weight {
+        PointWeight::Auto => screen::auto_point_weight(noise_voxels),
+        PointWeight::Fixed(a) => a,
+    };
+    let screen = screen.finish(point_weight);
     let (field, conv) = ctx.pool.install(|| solve_coarse(plan, v, &screen));
     drop(screen);
     drop(screen_permit);
@@ -294,6 +328,8 @@ fn coarse_pass(store: &Store, plan: &Plan, ctx: &Ctx) -> Result<CoarsePass> {
         occupied,
         support,
         iterations: conv.iterations,
+        point_weight,
+        noise_voxels,
     })
 }
 

@@ -376,7 +376,12 @@ fn fit_tile(
     mesh: &mut TileMesh,
     cp: &NearPoints,
 ) -> Result<()> {
-    let (h, fit) = (job.plan.spacing, job.params.fit);
+    let h = job.plan.spacing;
+    // The fit, with the samples' measured noise in input units (0 where unknown).
+    let fit = job
+        .params
+        .fit
+        .then(|| job.plan.noise_voxels.unwrap_or(0.0) * h);
     // The tile meshes' frame: offsets from the cube's corner (see `to_local`).
     let geom = GridGeom {
         origin: [0.0; 3],
@@ -413,7 +418,7 @@ fn fit_tile(
             fits[vi] = f;
         }
     }
-    if fit {
+    if fit.is_some() {
         mesh.positions = settle(
             &mesh.triangles,
             &mesh.keys,

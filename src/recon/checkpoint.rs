@@ -1,5 +1,5 @@
 //! The work directory's checkpoint formats: a leaf's detail (`SFLEAF03`) and a tile's mesh
-//! (`SFTILE06`, positions relative to the cube's lower corner), both zstd-compressed little-endian records written atomically, so that a
+//! (`SFTILE07`, positions relative to the cube's lower corner), both zstd-compressed little-endian records written atomically, so that a
 //! killed run leaves each file whole or absent and a resumed run reuses what it finds.
 
 use std::path::{Path, PathBuf};
@@ -120,7 +120,7 @@ pub fn leaf_detail(dir: &Path, key: CellKey, m: usize) -> Result<Detail> {
 
 /// Tile checkpoints: this magic, then the counts of vertices, triangles, colours and
 /// intensities (u64 each), then the records ([`write_tile`]).
-const TILE_MAGIC: &[u8; 8] = b"SFTILE06";
+const TILE_MAGIC: &[u8; 8] = b"SFTILE07";
 /// Bytes of a tile checkpoint's header: magic and four counts.
 const TILE_HEADER: usize = 40;
 /// Bytes of a tile checkpoint's vertex: edge key (u64) and position (f64×3).

@@ -37,7 +37,8 @@
 //!
 //! Every solve of the scheme, the coarse global one and both of each leaf, is **screened**
 //! (Kazhdan & Hoppe 2013, [`screen`]) with the weight `--point-weight` relative to its own
-//! grid: the samples aggregated per voxel of that grid pull the field to one value, which
+//! grid (under `auto`, one weight per run chosen from the samples' measured noise by the
+//! coarse pass, [`screen::auto_point_weight`]): the samples aggregated per voxel of that grid pull the field to one value, which
 //! restores the short wavelengths the Gaussian and the splat attenuate (about
 //! `exp(−2π²σ²/λ²)` for a wavelength of `λ` voxels). The coarse global solve aggregates the
 //! samples as the splat pass streams them, one entry per occupied coarse voxel; a leaf
@@ -72,7 +73,8 @@ pub use blend::{leaves_near, tile_blend};
 pub use coarse::{CoarseField, Moments};
 pub use global::{GlobalField, global_field};
 pub use leaf::{LeafDetail, LeafPoints, LeafSolvers, coarse_error, coarse_only, solve_leaf};
-pub use plan::{DEFAULT_ERROR, DEFAULT_MIN_POINTS, DEFAULT_POINT_WEIGHT, DEPTHS, Plan};
+pub use plan::{DEFAULT_ERROR, DEFAULT_MIN_POINTS, DEPTHS, Plan};
+pub use screen::PointWeight;
 
 use crate::types::CellKey;
 

@@ -36,9 +36,6 @@ pub const DEPTHS: std::ops::RangeInclusive<u32> = 5..=13;
 /// above the error of the coarse solve on smooth, clean surfaces (which are then left coarse).
 pub const DEFAULT_ERROR: f64 = 2e-5;
 
-/// Default `--point-weight`, the screening weight α ([`crate::recon::screen`]).
-pub const DEFAULT_POINT_WEIGHT: f64 = 4.0;
-
 /// Default `--min-points`: a leaf needs this many samples in its cell to be refined. A fixed
 /// count, not a share of the input (the paper's 0.5% suits 10⁵ points, not 10⁹): the detail
 /// of a leaf is defined by its own samples, whatever the size of the scan.
@@ -104,6 +101,11 @@ pub struct Plan {
     /// [`crate::recon::screen`].
     #[serde(default)]
     pub point_weight: f64,
+    /// The samples' spread across the surface in fine voxels, measured by the coarse pass
+    /// ([`crate::recon::screen::NoiseStats`]; `None` before it, or where no fine voxel holds
+    /// two samples).
+    #[serde(default)]
+    pub noise_voxels: Option<f64>,
 }
 
 impl Plan {
@@ -161,6 +163,7 @@ impl Plan {
             tile_level: depth - tile.trailing_zeros(),
             sigma_vox,
             point_weight,
+            noise_voxels: None,
         })
     }
 

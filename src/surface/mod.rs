@@ -64,7 +64,14 @@
 //! into the mesh, so the step is shrunk to `d · max(0, 1 − (2·se/d)²)`: an offset within
 //! twice the standard error hardly moves the vertex (the smooth Poisson surface is kept), a
 //! larger one is followed almost fully (the surface follows precise points as a screened
-//! solve would, Kazhdan & Hoppe, "Screened Poisson surface reconstruction", 2013). A vertex
+//! solve would, Kazhdan & Hoppe, "Screened Poisson surface reconstruction", 2013). Where
+//! the model itself misfits (a relief curved more tightly than the neighbourhood's radius,
+//! which neither the plane nor the jet can follow), the error at the vertex is of the order
+//! of the residuals rather than of their mean, so `se` is at least half the residuals'
+//! spread beyond three times the samples' measured noise ([`fit`]'s `MISFIT_SHARE`,
+//! `NOISE_SPAN`; the noise is [`crate::recon::screen::NoiseStats`]'s): there the screened
+//! field, already through the samples, is kept (a relief of 8 voxels' wavelength:
+//! 6.9·10⁻⁴ → 5.5·10⁻⁴), while residuals that noise explains leave the fit as it was. A vertex
 //! moves only where its nearest point is within two voxels and its plane within two voxels,
 //! so regions the coarse solution closed (holes) are left as solved.
 //!

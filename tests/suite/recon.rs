@@ -555,3 +555,31 @@ fn same_mesh_for_any_thread_count_under_a_tight_budget() {
     }
     assert!(meshes[0] == meshes[1], "the mesh depends on --threads");
 }
+
+#[test]
+fn auto_screening_weight_follows_the_noise() {
+    // `--point-weight auto` (the default) measures the samples' spread across the surface:
+    // precise samples are screened with the largest weight, noisy ones (2 voxels here) with
+    // PoissonRecon's 4; a given weight is used as it is.
+    let d = tempfile::tempdir().unwrap();
+    let weight = |summary: &str| {
+        let at = summary.find("--point-weight ").expect(summary) + "--point-weight ".len();
+        let w: String = summary[at..]
+            .chars()
+            .take_while(|c| c.is_ascii_digit() || *c == '.')
+            .collect();
+        (w.parse::<f64>().unwrap(), summary[at..].contains("voxel)"))
+    };
+    for (noise, want) in [(0.0, 32.0), (0.01, 4.0)] {
+        let sub = d.path().join(format!("n{noise}"));
+        std::fs::create_dir(&sub).unwrap();
+        let ply = synth(&sub, "sphere", 40_000, noise);
+        let out = sub.join("o.ply");
+        let got = weight(&recon(&ply, &out, &["--depth", "7"]));
+        assert_eq!(got, (want, true), "noise {noise}");
+    }
+    let ply = d.path().join("n0").join("sphere.ply");
+    let out = d.path().join("fixed.ply");
+    let got = weight(&recon(&ply, &out, &["--depth", "7", "--point-weight", "6"]));
+    assert_eq!(got, (6.0, false));
+}
