@@ -329,7 +329,7 @@ impl Solver {
 
     /// The screened solve (see [`super::screen`]): `(L + Sᵀ Γ S) χ = b + Sᵀ Γ c` by
     /// conjugate gradients preconditioned with the FFT inverse of `L + μ`, `μ` a share
-    /// ([`PRECONDITIONER_SHIFT`]) of the screening's mean diagonal `Σ γ / n³`, which also
+    /// (`PRECONDITIONER_SHIFT`) of the screening's mean diagonal `Σ γ / n³`, which also
     /// fixes the constant that `L` leaves free.
     /// Starts from the unscreened solution, whose residual is the screening term alone, and
     /// stops when the preconditioned residual `rᵀ M⁻¹ r` has fallen by [`SCREEN_TOLERANCE`]²

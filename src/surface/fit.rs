@@ -188,7 +188,7 @@ impl NearPoints {
 /// within the edge by [`edge_margin`]. Not moved (only kept within the edge) when fewer than
 /// 3 neighbours, the nearest beyond two voxels, or the plane beyond two voxels. `noise` is
 /// the samples' measured spread across the surface (input units; 0 where unknown), the part
-/// of the residuals that does not count as a misfit ([`MISFIT_SHARE`]).
+/// of the residuals that does not count as a misfit (`MISFIT_SHARE`).
 pub fn project(
     v: [f64; 3],
     axis: usize,
