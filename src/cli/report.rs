@@ -6,10 +6,11 @@ use std::path::Path;
 use anyhow::Result;
 
 use scanflow::exec::{human_bytes, peak_rss_bytes};
+use scanflow::io::las_meta::class_name;
 use scanflow::metrics::CheckReport;
 use scanflow::pipeline::ReconStats;
 use scanflow::store::verify::VerifyReport;
-use scanflow::store::{FileInfo, IngestStats, Store};
+use scanflow::store::{FileInfo, IngestStats, LasInfo, Store};
 use scanflow::synth::{Shape, SynthReport};
 use scanflow::types::Aabb;
 
@@ -203,7 +204,57 @@ pub fn file(fi: &FileInfo, json: bool) -> Result<()> {
             fi.invalid_points
         );
     }
+    if let Some(l) = &fi.las {
+        las(l);
+    }
     Ok(())
+}
+
+/// The LAS lines of `info` on a file: header, CRS, classes and returns, warnings.
+fn las(l: &LasInfo) {
+    let m = &l.meta;
+    outln!(
+        "las         version {}, point format {}{}",
+        m.version,
+        m.point_format,
+        if m.compressed {
+            ", LASzip-compressed"
+        } else {
+            ""
+        }
+    );
+    outln!("scale       {} {} {}", m.scale[0], m.scale[1], m.scale[2]);
+    outln!(
+        "offset      {} {} {}",
+        m.offset[0],
+        m.offset[1],
+        m.offset[2]
+    );
+    let date = m
+        .creation_date
+        .as_ref()
+        .map(|d| format!(", created {d}"))
+        .unwrap_or_default();
+    outln!(
+        "software    {:?} (system {:?}){date}",
+        m.generating_software,
+        m.system_identifier
+    );
+    outln!("crs         {}", m.crs.summary());
+    let classes: Vec<String> = l
+        .classes
+        .iter()
+        .map(|(c, n)| match class_name(*c) {
+            Some(name) => format!("{c} {name}: {n}"),
+            None => format!("{c}: {n}"),
+        })
+        .collect();
+    outln!("classes     {}", classes.join(", "));
+    let returns: Vec<String> = l.returns.iter().map(|(r, n)| format!("{r}: {n}")).collect();
+    outln!("returns     {}", returns.join(", "));
+    for w in &l.warnings {
+        outln!("warning     {w}");
+    }
 }
 
 /// The `bounds` line of `info`.

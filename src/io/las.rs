@@ -15,6 +15,7 @@ use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::path::{Path, PathBuf};
 
 use crate::error::{Error, IoContext, Location, Result};
+use crate::io::las_meta::{LasMeta, LasTally};
 use crate::io::{ChunkSpec, ChunkStats, Format, PointReader, invalid_coordinate_msg};
 use crate::types::{Aabb, Attributes, PointBatch};
 
@@ -251,6 +252,8 @@ pub struct LasReader {
     /// LAZ: points per LASzip chunk, when fixed. Seeking decompresses from the start of a
     /// LASzip chunk, so chunks are cut on their boundaries.
     laz_chunk: Option<u64>,
+    /// Header metadata and CRS, for `info`.
+    meta: LasMeta,
 }
 
 impl LasReader {
@@ -271,6 +274,7 @@ impl LasReader {
         let len = header.number_of_points();
         let record_len = u64::from(fmt.len());
         let point_format = fmt.to_u8().unwrap_or(raw.point_data_record_format & 0x3f);
+        let meta = LasMeta::from_header(header, point_format);
 
         if !compressed {
             check_record_bytes(path, file_len, data_start, len, record_len)?;
@@ -305,6 +309,7 @@ impl LasReader {
             has_color: fmt.has_color,
             bounds: bounds_ok.then_some(bounds),
             laz_chunk,
+            meta,
         })
     }
 
@@ -406,8 +411,62 @@ impl PointReader for LasReader {
         out: &mut PointBatch,
     ) -> Result<ChunkStats> {
         let mut stats = ChunkStats::default();
+        let reserve = usize::try_from(chunk.count).unwrap_or(0);
+        out.pos.reserve(reserve);
+        out.intensity.reserve(reserve);
+        if self.has_color {
+            out.color.reserve(reserve);
+        }
+        self.each_batch(chunk, |at, points| {
+            for (k, p) in points.iter().enumerate() {
+                let xyz = [p.x, p.y, p.z];
+                if let Some(msg) = invalid_coordinate_msg(xyz) {
+                    if skip_invalid {
+                        stats.skipped_invalid += 1;
+                        continue;
+                    }
+                    return Err(self.element_error(at + k as u64, msg));
+                }
+                out.pos.push(xyz);
+                out.intensity.push(f32::from(p.intensity));
+                if self.has_color {
+                    out.color.push(
+                        p.color
+                            .map_or([0, 0, 0, u16::MAX], |c| [c.red, c.green, c.blue, u16::MAX]),
+                    );
+                }
+            }
+            Ok(())
+        })?;
+        Ok(stats)
+    }
+
+    fn las_meta(&self) -> Option<&LasMeta> {
+        Some(&self.meta)
+    }
+
+    fn las_tally(&self, chunk: &ChunkSpec) -> Result<Option<LasTally>> {
+        let mut t = LasTally::default();
+        self.each_batch(chunk, |_, points| {
+            for p in points {
+                t.add(u8::from(p.classification), p.return_number);
+            }
+            Ok(())
+        })?;
+        Ok(Some(t))
+    }
+}
+
+impl LasReader {
+    /// Decode the points of `chunk` in batches of at most [`BATCH`], handing each to `f` with
+    /// the index of its first point. Errors name the point where decoding stopped.
+    fn each_batch(
+        &self,
+        chunk: &ChunkSpec,
+        mut f: impl FnMut(u64, &[las::Point]) -> Result<()>,
+    ) -> Result<()> {
         if chunk.count == 0 {
-            return Ok(stats);
+            return Ok(());
         }
         if chunk
             .first_index
@@ -446,12 +505,6 @@ impl PointReader for LasReader {
             .map_err(|p| self.element_error(first, self.panic_msg(&p)))?
             .map_err(|e| self.decode_error(first, &e))?;
 
-        let reserve = usize::try_from(chunk.count).unwrap_or(0);
-        out.pos.reserve(reserve);
-        out.intensity.reserve(reserve);
-        if self.has_color {
-            out.color.reserve(reserve);
-        }
         let mut points = Vec::with_capacity(usize::try_from(chunk.count.min(BATCH)).unwrap_or(0));
         let mut done = 0u64;
         while done < chunk.count {
@@ -471,27 +524,10 @@ impl PointReader for LasReader {
                     ),
                 ));
             }
-            for (k, p) in points.iter().enumerate() {
-                let xyz = [p.x, p.y, p.z];
-                if let Some(msg) = invalid_coordinate_msg(xyz) {
-                    if skip_invalid {
-                        stats.skipped_invalid += 1;
-                        continue;
-                    }
-                    return Err(self.element_error(at + k as u64, msg));
-                }
-                out.pos.push(xyz);
-                out.intensity.push(f32::from(p.intensity));
-                if self.has_color {
-                    out.color.push(
-                        p.color
-                            .map_or([0, 0, 0, u16::MAX], |c| [c.red, c.green, c.blue, u16::MAX]),
-                    );
-                }
-            }
+            f(at, &points)?;
             done += want;
         }
-        Ok(stats)
+        Ok(())
     }
 }
 

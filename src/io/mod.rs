@@ -38,6 +38,7 @@ pub mod atomic;
 pub mod conf;
 pub mod iges;
 pub mod las;
+pub mod las_meta;
 pub mod mesh_read;
 pub mod mesh_write;
 pub mod mmap;
@@ -131,6 +132,14 @@ pub trait PointReader: Send + Sync {
     /// Bounds from the header, when the format stores them (LAS).
     fn header_bounds(&self) -> Option<crate::types::Aabb> {
         None
+    }
+    /// A LAS file's header metadata and CRS ([`las_meta`]); `None` for other formats.
+    fn las_meta(&self) -> Option<&las_meta::LasMeta> {
+        None
+    }
+    /// A LAS file's classes and return numbers in `chunk`; `None` for other formats.
+    fn las_tally(&self, _chunk: &ChunkSpec) -> Result<Option<las_meta::LasTally>> {
+        Ok(None)
     }
     /// True when every coordinate is stored as a float32 (or a narrower integer), so that
     /// f32 holds it exactly.

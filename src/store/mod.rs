@@ -68,7 +68,7 @@ use octree::Hierarchy;
 use scatter::{CellOut, Scatter};
 use split::Splitter;
 
-pub use info::{FileInfo, file_info};
+pub use info::{FileInfo, LasInfo, file_info};
 pub use input::open_inputs;
 
 /// The root cube is the bounding box's largest edge enlarged by 10% (PoissonRecon's default

@@ -166,3 +166,77 @@ fn bunny_scans_align_through_conf() {
     ]);
     assert_eq!(Store::open(&store).unwrap().manifest.point_count, 362272);
 }
+
+#[test]
+fn info_gives_the_las_header_crs_classes_and_returns_as_laspy_reads_them() {
+    let Some(p) = shared("lidar/autzen_trim.las") else {
+        return;
+    };
+    let json: serde_json::Value =
+        serde_json::from_str(&ok(&["info", s(&p), "--json", "--progress", "none"])).unwrap();
+    let las = &json["las"];
+    assert_eq!(las["version"], "1.2");
+    assert_eq!(las["point_format"], 3);
+    assert_eq!(las["generating_software"], "PDAL 1.0.0 (9e8465)");
+    let wkt = las["crs"]["wkt"].as_str().unwrap();
+    assert!(wkt.starts_with("PROJCS[\"NAD_1983_HARN_Lambert_Conformal_Conic\""));
+    assert!(las["warnings"].as_array().unwrap().is_empty());
+    let sum = |v: &serde_json::Value| {
+        v.as_object()
+            .unwrap()
+            .values()
+            .map(|n| n.as_u64().unwrap())
+            .sum::<u64>()
+    };
+    assert_eq!(sum(&las["classes"]), 110_000);
+    assert_eq!(sum(&las["returns"]), 110_000);
+    let text = ok(&["info", s(&p), "--progress", "none"]);
+    for want in [
+        "las         version 1.2, point format 3",
+        "scale       0.01 0.01 0.01",
+        "crs         projected user-defined, geographic user-defined, WKT \"NAD_1983_HARN_Lambert_Conformal_Conic\"",
+        "classes     1 unclassified: ",
+    ] {
+        assert!(text.contains(want), "{want}\n{text}");
+    }
+    // The same figures from an independent reader.
+    let script = r#"
+import json, sys
+import numpy as np
+import laspy
+f = laspy.read(sys.argv[1])
+h = f.header
+cls, cn = np.unique(np.asarray(f.classification), return_counts=True)
+ret, rn = np.unique(np.asarray(f.return_number), return_counts=True)
+wkt = [v.string for v in h.vlrs if v.record_id == 2112]
+print(json.dumps(dict(version="%d.%d" % (h.version.major, h.version.minor),
+    point_format=h.point_format.id, scale=list(map(float, h.scales)),
+    offset=list(map(float, h.offsets)), software=h.generating_software,
+    classes={str(int(c)): int(n) for c, n in zip(cls, cn)},
+    returns={str(int(r)): int(n) for r, n in zip(ret, rn)},
+    wkt=wkt[0] if wkt else None)))
+"#;
+    let out = std::process::Command::new("python3")
+        .args(["-c", script, s(&p)])
+        .output()
+        .ok()
+        .filter(|o| o.status.success());
+    let Some(out) = out else {
+        eprintln!("skipped the laspy comparison: python3 with laspy and numpy is not available");
+        return;
+    };
+    let want: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(las["version"], want["version"]);
+    assert_eq!(las["point_format"], want["point_format"]);
+    assert_eq!(las["scale"], want["scale"]);
+    assert_eq!(las["offset"], want["offset"]);
+    assert_eq!(las["generating_software"], want["software"]);
+    assert_eq!(las["classes"], want["classes"]);
+    assert_eq!(las["returns"], want["returns"]);
+    assert_eq!(
+        las["crs"]["wkt"].as_str().map(str::trim),
+        want["wkt"]
+            .as_str()
+            .map(|w| w.trim_end_matches('\0').trim())
+    );
+}
