@@ -22,8 +22,9 @@ use super::{paths, report, signals};
 
 /// Reconstruct and print the summary.
 pub fn run(c: &ReconstructConfig, ctx: &Ctx) -> Result<()> {
+    let t0 = std::time::Instant::now();
     let st = reconstruct(ctx, &c.points, &c.output, &c.params, c.keep_work)?;
-    report::reconstruct(&st, &c.output);
+    report::reconstruct(&st, &c.output, t0.elapsed().as_secs_f64());
     if let Some(job) = &c.hex {
         let st = scanflow::pipeline::hexmesh::hexmesh(job, ctx)?;
         super::hex::summary(&st, &job.output)?;

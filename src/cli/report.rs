@@ -59,8 +59,9 @@ pub fn ingest(st: &IngestStats, out: &Path) {
     );
 }
 
-/// `reconstruct`'s line.
-pub fn reconstruct(st: &ReconStats, out: &Path) {
+/// `reconstruct`'s line: the whole run's time `total_secs` (ingest and normal estimation
+/// included, where the inputs were point files), then the solve and mesh's own.
+pub fn reconstruct(st: &ReconStats, out: &Path, total_secs: f64) {
     let noise = st
         .noise_voxels
         .map(|s| format!(" (noise {s:.3} voxel)"))
@@ -68,23 +69,33 @@ pub fn reconstruct(st: &ReconStats, out: &Path) {
     let screened = if st.point_weight > 0.0 && st.leaves_solved > 0 {
         format!(
             ", screened with --point-weight {}{noise}: {:.1} CG iterations a leaf",
-            st.point_weight,
+            short(st.point_weight),
             st.leaf_iterations as f64 / st.leaves_solved as f64
         )
     } else {
         String::new()
     };
     outln!(
-        "reconstructed {} vertices, {} triangles into {} in {:.2} s ({} leaves, {} refined{screened}, iso {:.4}), peak memory {}",
+        "reconstructed {} vertices, {} triangles into {} in {:.2} s (solve and mesh {:.2} s; {} leaves, {} refined{screened}; iso-value of the field {:.4}), peak memory {}",
         st.vertices,
         st.faces,
         out.display(),
+        total_secs,
         st.secs,
         st.leaves,
         st.leaves_refined,
         st.iso,
         human_bytes(peak_rss_bytes())
     );
+}
+
+/// `x` as written where it is whole, else to 2 decimals.
+fn short(x: f64) -> String {
+    if x.fract() == 0.0 {
+        format!("{x}")
+    } else {
+        format!("{x:.2}")
+    }
 }
 
 /// `check`'s report, as text or one JSON line.
