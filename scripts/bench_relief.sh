@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
-# Fine relief, with and without noise: scanflow reconstruct (screened with the vertex fit, the
-# default, whose --point-weight auto follows the measured noise: the fit_*.log files give the
-# weight; unscreened, --point-weight 0; and screened with --no-fit) against PoissonRecon (screened, pymeshlab) and Open3D's Poisson on the same points, same
+# Fine relief, with and without noise: scanflow reconstruct (screened with the vertex fit and
+# --point-weight auto, which follows the measured noise: the fit_*.log files give the weight;
+# unscreened, --point-weight 0; and screened with --no-fit) against PoissonRecon (screened, pymeshlab) and Open3D's Poisson on the same points, same
 # depth, same run (scripts/poisson_peer.py). A sphere of radius 1 carries the relief
 # 1 + a sin(k x) sin(k y) sin(k z) (`scanflow synth bumpy --amplitude a --frequency k`); its
 # wavelength 2π/k is WAVES voxels at DEPTH (a voxel is 1.1 × the bounding box over 2^DEPTH,
@@ -52,7 +52,7 @@ for a in $AMPS; do
         --noise "$noise" -o "$PLY" --progress none > /dev/null
       TRUTH=$DIR/$tag.truth.json
       cat "$PLY" > /dev/null
-      read -r fs fmb < <(run "fit_$tag" "$BIN" reconstruct "$PLY" -o "$DIR/fit_$tag.ply" --depth "$DEPTH" --threads "$THREADS" --progress none)
+      read -r fs fmb < <(run "fit_$tag" "$BIN" reconstruct "$PLY" -o "$DIR/fit_$tag.ply" --depth "$DEPTH" --threads "$THREADS" --point-weight auto --progress none)
       read -r us _ < <(run "unscr_$tag" "$BIN" reconstruct "$PLY" -o "$DIR/unscr_$tag.ply" --depth "$DEPTH" --threads "$THREADS" --point-weight 0 --progress none)
       run "nofit_$tag" "$BIN" reconstruct "$PLY" -o "$DIR/nofit_$tag.ply" --depth "$DEPTH" --threads "$THREADS" --no-fit --progress none > /dev/null
       read -r ps pmb < <(run "pr_$tag" python3 scripts/poisson_peer.py "$PLY" "$DIR/pr_$tag.ply" "$DEPTH" "$THREADS")

@@ -554,9 +554,9 @@ pub struct ReconstructArgs {
     /// Screening weight α of the screened Poisson solve (Kazhdan & Hoppe 2013): how
     /// strongly the surface is pulled through the samples against the smoothed normals, in
     /// [0, 64]; 0 solves the unscreened equation. `auto` measures the samples' noise and
-    /// takes 4 (PoissonRecon's default) for typical scans, up to 32 for precise samples.
+    /// takes 4 for noisy scans, up to 32 for precise ones (fine relief, metrology). Default 4,
     /// PoissonRecon's `--pointWeight` (also accepted), with its scaling by depth.
-    #[arg(long, alias = "pointWeight", default_value = "auto")]
+    #[arg(long, alias = "pointWeight", default_value = "4")]
     pub point_weight: String,
     /// Keep the vertices where marching cubes put them, instead of moving each onto the
     /// plane (or, where they are curved, the quadratic jet) of its nearest input points (by

@@ -47,8 +47,8 @@ pub struct ReconParams {
     pub depth: u32,
     /// Gaussian smoothing width, in voxels of each grid.
     pub sigma_vox: f64,
-    /// Screening weight α (`--point-weight`: `auto` from the samples' noise, or a fixed α, 0:
-    /// unscreened), see [`crate::recon::screen`].
+    /// Screening weight α (`--point-weight`: a fixed α, default 4, 0: unscreened; or `auto`
+    /// from the samples' noise), see [`crate::recon::screen`].
     pub point_weight: PointWeight,
     /// Tile edge in fine voxels (`None`: 64, at least one leaf, at most the cube).
     pub tile_voxels: Option<u64>,
@@ -78,7 +78,7 @@ impl ReconParams {
         ReconParams {
             depth,
             sigma_vox: 1.0,
-            point_weight: PointWeight::Auto,
+            point_weight: PointWeight::Fixed(screen::BASE_POINT_WEIGHT),
             fit: true,
             tile_voxels: None,
             work_dir,
