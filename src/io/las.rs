@@ -410,6 +410,35 @@ impl PointReader for LasReader {
         skip_invalid: bool,
         out: &mut PointBatch,
     ) -> Result<ChunkStats> {
+        self.read_into(chunk, skip_invalid, out, None)
+    }
+
+    fn las_meta(&self) -> Option<&LasMeta> {
+        Some(&self.meta)
+    }
+
+    fn read_chunk_tally(
+        &self,
+        chunk: &ChunkSpec,
+        skip_invalid: bool,
+        out: &mut PointBatch,
+    ) -> Result<(ChunkStats, Option<LasTally>)> {
+        let mut t = LasTally::default();
+        let stats = self.read_into(chunk, skip_invalid, out, Some(&mut t))?;
+        Ok((stats, Some(t)))
+    }
+}
+
+impl LasReader {
+    /// Decode `chunk` into `out` (the records with an invalid coordinate skipped, or an error,
+    /// as `skip_invalid` says), counting every record's class and return number into `tally`.
+    fn read_into(
+        &self,
+        chunk: &ChunkSpec,
+        skip_invalid: bool,
+        out: &mut PointBatch,
+        mut tally: Option<&mut LasTally>,
+    ) -> Result<ChunkStats> {
         let mut stats = ChunkStats::default();
         let reserve = usize::try_from(chunk.count).unwrap_or(0);
         out.pos.reserve(reserve);
@@ -419,6 +448,9 @@ impl PointReader for LasReader {
         }
         self.each_batch(chunk, |at, points| {
             for (k, p) in points.iter().enumerate() {
+                if let Some(t) = tally.as_deref_mut() {
+                    t.add(u8::from(p.classification), p.return_number);
+                }
                 let xyz = [p.x, p.y, p.z];
                 if let Some(msg) = invalid_coordinate_msg(xyz) {
                     if skip_invalid {
@@ -441,23 +473,6 @@ impl PointReader for LasReader {
         Ok(stats)
     }
 
-    fn las_meta(&self) -> Option<&LasMeta> {
-        Some(&self.meta)
-    }
-
-    fn las_tally(&self, chunk: &ChunkSpec) -> Result<Option<LasTally>> {
-        let mut t = LasTally::default();
-        self.each_batch(chunk, |_, points| {
-            for p in points {
-                t.add(u8::from(p.classification), p.return_number);
-            }
-            Ok(())
-        })?;
-        Ok(Some(t))
-    }
-}
-
-impl LasReader {
     /// Decode the points of `chunk` in batches of at most [`BATCH`], handing each to `f` with
     /// the index of its first point. Errors name the point where decoding stopped.
     fn each_batch(

@@ -137,9 +137,15 @@ pub trait PointReader: Send + Sync {
     fn las_meta(&self) -> Option<&las_meta::LasMeta> {
         None
     }
-    /// A LAS file's classes and return numbers in `chunk`; `None` for other formats.
-    fn las_tally(&self, _chunk: &ChunkSpec) -> Result<Option<las_meta::LasTally>> {
-        Ok(None)
+    /// [`PointReader::read_chunk`], and for a LAS file the classes and return numbers of the
+    /// chunk's records counted in the same pass (`None` for other formats).
+    fn read_chunk_tally(
+        &self,
+        chunk: &ChunkSpec,
+        skip_invalid: bool,
+        out: &mut PointBatch,
+    ) -> Result<(ChunkStats, Option<las_meta::LasTally>)> {
+        Ok((self.read_chunk(chunk, skip_invalid, out)?, None))
     }
     /// True when every coordinate is stored as a float32 (or a narrower integer), so that
     /// f32 holds it exactly.

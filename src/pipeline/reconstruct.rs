@@ -214,12 +214,9 @@ fn plan_run(store: &Store, params: &ReconParams, ctx: &Ctx) -> Result<Plan> {
         m.cube,
         params.depth,
         params.sigma_vox,
-        // `auto` is at least the base weight: the grids are sized for a screened solve, and
-        // the coarse pass sets the weight.
-        match params.point_weight {
-            PointWeight::Auto => screen::BASE_POINT_WEIGHT,
-            PointWeight::Fixed(a) => a,
-        },
+        // Before the noise is measured `auto` is the base weight: the grids are sized for a
+        // screened solve, and the coarse pass sets the weight.
+        params.point_weight.alpha(None),
         params.tile_voxels,
         ctx.budget.share(Share::CoarseGrid),
     )
@@ -313,10 +310,7 @@ fn coarse_pass(store: &Store, plan: &Plan, weight: PointWeight, ctx: &Ctx) -> Re
     moments.check_not_flat(&store.dir)?;
     let stage = ctx.progress.stage("coarse", None, "solves");
     let noise_voxels = noise.sigma_voxels();
-    let point_weight = match weight {
-        PointWeight::Auto => screen::auto_point_weight(noise_voxels),
-        PointWeight::Fixed(a) => a,
-    };
+    let point_weight = weight.alpha(noise_voxels);
     let screen = screen.finish(point_weight);
     let (field, conv) = ctx.pool.install(|| solve_coarse(plan, v, &screen));
     drop(screen);

@@ -38,13 +38,14 @@
 //! Every solve of the scheme, the coarse global one and both of each leaf, is **screened**
 //! (Kazhdan & Hoppe 2013, [`screen`]) with the weight `--point-weight` relative to its own
 //! grid (under `auto`, one weight per run chosen from the samples' measured noise by the
-//! coarse pass, [`screen::auto_point_weight`]): the samples aggregated per voxel of that grid pull the field to one value, which
-//! restores the short wavelengths the Gaussian and the splat attenuate (about
-//! `exp(−2π²σ²/λ²)` for a wavelength of `λ` voxels). The coarse global solve aggregates the
-//! samples as the splat pass streams them, one entry per occupied coarse voxel; a leaf
-//! aggregates its own points on each of its two grids. The detail is still the fine minus the
-//! coarse local solution, both screened, so the blend keeps matching one global solve screened
-//! the same way (the test `two_level_matches_one_global_solve` checks both).
+//! coarse pass, [`screen::auto_point_weight`]): the samples aggregated per voxel of that grid
+//! pull the field to one value, which restores the short wavelengths the Gaussian and the
+//! splat attenuate (about `exp(−2π²σ²/λ²)` for a wavelength of `λ` voxels). The coarse
+//! global solve aggregates the samples as the splat pass streams them, one entry per
+//! occupied coarse voxel; a leaf aggregates its own points on each of its two grids. The
+//! detail is still the fine minus the coarse local solution, both screened, so the blend
+//! keeps matching one global solve screened the same way (the test
+//! `two_level_matches_one_global_solve` checks both).
 //!
 //! **Grid conventions** (written once, here; [`plan`]). The cube is the store's root cube (the
 //! bounding box enlarged 10%, PoissonRecon's `--scale 1.1`). Depth `D` gives `N = 2^D` cells

@@ -86,11 +86,12 @@ pub enum PointWeight {
 }
 
 impl PointWeight {
-    /// Whether the solves are screened (`auto` always is).
-    pub fn screened(self) -> bool {
+    /// The α to solve with, for samples of spread `sigma` ([`NoiseStats::sigma_voxels`];
+    /// `None`: not measured, where `auto` takes [`BASE_POINT_WEIGHT`]).
+    pub fn alpha(self, sigma: Option<f64>) -> f64 {
         match self {
-            PointWeight::Auto => true,
-            PointWeight::Fixed(a) => a > 0.0,
+            PointWeight::Auto => auto_point_weight(sigma),
+            PointWeight::Fixed(a) => a,
         }
     }
 }
@@ -397,21 +398,16 @@ mod tests {
         // 40K samples on the plane through the middle of a layer of fine voxels (h = 0.01)
         // with offsets of known spread s along z, normals up: the estimate reads s back (a
         // spread near a voxel is read low, cut by the voxels' faces).
+        use rand::{Rng, SeedableRng};
+        use rand_distr::StandardNormal;
         let h = 0.01;
-        let mut seed = 12345u64;
-        let mut uni = || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (seed >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(12345);
         for s in [0.0, 0.05, 0.15] {
             let mut pos = Vec::new();
             for _ in 0..40_000 {
-                // Box-Muller.
-                let (u1, u2) = (uni().max(1e-300), uni());
-                let g = (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos();
-                pos.push([0.5 * uni(), 0.5 * uni(), 0.5 + (0.5 + s * g) * h]);
+                let g: f64 = rng.sample(StandardNormal);
+                let (x, y) = (0.5 * rng.random::<f64>(), 0.5 * rng.random::<f64>());
+                pos.push([x, y, 0.5 + (0.5 + s * g) * h]);
             }
             let nrm = vec![[0.0, 0.0, 1.0]; pos.len()];
             let st = NoiseStats::of(&pos, &nrm, [0.0; 3], h);

@@ -62,8 +62,7 @@ pub fn file_info(path: &Path, ctx: &Ctx) -> Result<FileInfo> {
                     .budget
                     .acquire(spec.count * CHUNK_BYTES_PER_POINT, "a chunk of points")?;
                 b.clear();
-                let st = r.read_chunk(spec, true, b)?;
-                let tally = r.las_tally(spec)?;
+                let (st, tally) = r.read_chunk_tally(spec, true, b)?;
                 stage.inc(spec.count);
                 Ok((batch_bounds(b), st.skipped_invalid, tally))
             })

@@ -65,7 +65,8 @@ pub struct VertexFit {
 impl NearPoints {
     /// For each vertex (at `vertices[i]` on grid edge `keys[i]` of `geom`): its position moved
     /// along its edge toward the plane of its [`FIT_NEIGHBOURS`] nearest input points (when
-    /// `fit` gives the samples' measured noise in input units, 0 where unknown: [`project`]), and its colour and intensity ([`blend_colour`]). Neighbours are
+    /// `fit` gives the samples' measured noise in input units, 0 where unknown: [`project`]),
+    /// and its colour and intensity ([`blend_colour`]). Neighbours are
     /// ordered by distance, then position, then colour, so the answer depends only on the
     /// point set and the vertex. Also returns the vertices whose answer may not be exact:
     /// their farthest neighbour lies beyond the gathered box's faces.
@@ -211,15 +212,14 @@ fn project_plane(
 ) -> ([f64; 3], Option<(Plane, f64)>) {
     let mut p = v;
     p[axis] = clamp_to_edge(v[axis], edge);
-    let Some(mut plane) = Plane::fit(nb, h) else {
+    let Some(plane) = Plane::fit(nb, h) else {
         return (p, None);
     };
-    plane.noise = noise;
     let off = plane.offset(v);
     if off.abs() > 2.0 * h || off == 0.0 {
         return (p, None);
     }
-    let step = plane.shrink(off);
+    let step = plane.shrink(off, noise);
     p[axis] = clamp_to_edge(v[axis] + plane.along(v, axis, step), edge);
     (p, Some((plane, off - step)))
 }
@@ -277,19 +277,17 @@ struct Plane {
     se: f64,
     /// The residuals' standard deviation, `√(RSS/(k − p))` for `p` fitted parameters.
     sd: f64,
-    /// The samples' measured spread across the surface (input units): the part of `sd` that
-    /// noise explains.
-    noise: f64,
 }
 
 /// The share of the residuals' spread beyond what noise explains, `√(sd² − (3σ)²)`, that
 /// bounds how well the fit knows the offset, beside its standard error: where the plane or
 /// the jet misfits the points (a relief whose curvature radius is under the neighbourhood's
-/// radius), the error at the vertex is of the order of the residuals, not of their mean. Measured on 1M-point spheres carrying a
-/// relief of 1% amplitude at depth 9 (mean distance to the exact surface, screened with
-/// α = 32): at 8 voxels' wavelength, 6.9·10⁻⁴ with the standard error alone, 5.5·10⁻⁴ with
-/// 0.5, 5.0·10⁻⁴ with 1 (the field alone: 5.0·10⁻⁴); at 18 voxels 9.3, 9.1 and 10.7·10⁻⁵;
-/// at 30 voxels 2.85, 2.87 and 3.4·10⁻⁵.
+/// radius), the error at the vertex is of the order of the residuals, not of their mean.
+/// Measured on 1M-point spheres carrying a relief of 1% amplitude at depth 9 (mean distance
+/// to the exact surface, screened with α = 32, residuals counted whole): at 8 voxels'
+/// wavelength, 6.9·10⁻⁴ with the standard error alone, 5.5·10⁻⁴ with 0.5, 5.0·10⁻⁴ with 1
+/// (the field alone: 5.0·10⁻⁴); at 18 voxels 9.3, 9.1 and 10.7·10⁻⁵; at 30 voxels 2.85,
+/// 2.87 and 3.4·10⁻⁵.
 const MISFIT_SHARE: f64 = 0.5;
 
 /// Residuals within this many times the samples' measured noise `σ` are taken as noise, not
@@ -343,7 +341,6 @@ impl Plane {
             q: [0.0; 6],
             se: rss_plane.sqrt() / k,
             sd: (rss_plane / (k - 3.0).max(1.0)).sqrt(),
-            noise: 0.0,
         };
         plane.bend(nb, rss_plane, h);
         Some(plane)
@@ -452,10 +449,10 @@ impl Plane {
     }
 
     /// The part of offset `off` to remove: shrunk toward zero by how much of it the fit's
-    /// error could explain (its standard error, or [`MISFIT_SHARE`] of its residuals where
-    /// that is larger).
-    fn shrink(&self, off: f64) -> f64 {
-        let explained = NOISE_SPAN * self.noise;
+    /// error could explain (its standard error, or [`MISFIT_SHARE`] of its residuals beyond
+    /// [`NOISE_SPAN`] times the samples' measured `noise`, input units, where that is larger).
+    fn shrink(&self, off: f64, noise: f64) -> f64 {
+        let explained = NOISE_SPAN * noise;
         let misfit = (self.sd * self.sd - explained * explained).max(0.0).sqrt();
         let se = self.se.max(MISFIT_SHARE * misfit);
         off * (1.0 - (2.0 * se / off).powi(2)).max(0.0)
