@@ -194,6 +194,9 @@ pub enum Cmd {
     /// write them as IGES (entity 128): one surface for a disc-like patch (a range scan, a
     /// height field), one per tile for terrain (--tiles).
     Fit(FitArgs),
+    /// Weld the tiles the shards of a split reconstruction (reconstruct --shard) left in their
+    /// work directory into one mesh, the same bytes one process writes.
+    Merge(MergeArgs),
     /// Hexahedral mesh of a tetrahedral one by CubeCover (Nieser, Reitebuch, Polthier 2011):
     /// frame field, singular edges, integer-grid parameterisation with greedy rounding, hex
     /// extraction, relaxation; written only when no hexahedron is inverted.
@@ -567,6 +570,13 @@ pub struct ReconstructArgs {
     /// the GPU path is not yet measured faster end to end.
     #[arg(long, value_enum, default_value_t = GpuChoice::Off)]
     pub gpu: GpuChoice,
+    /// Do one slice of the work, as one task of a cluster array job sharing --work-dir with
+    /// the others: I/N (shard I of N, from 0), auto (SLURM's SLURM_ARRAY_TASK_ID and
+    /// _COUNT) or auto/N (the index from SLURM, JOB_COMPLETION_INDEX under Kubernetes or
+    /// AWS_BATCH_JOB_ARRAY_INDEX). Reads a store made by `ingest`; writes no mesh: `merge`
+    /// does, once every shard has finished. Give every shard the same options and --mem.
+    #[arg(long, value_name = "I/N|auto|auto/N", conflicts_with = "hex")]
+    pub shard: Option<String>,
     /// Then mesh the inside of the reconstructed surface with hexahedra (as `hexmesh OUTPUT
     /// -o HEX` with polycube frames) and write them here: .vtk, .mesh or .msh. Needs a
     /// closed surface (no --trim).
@@ -579,6 +589,23 @@ pub struct ReconstructArgs {
     /// Normal options.
     #[command(flatten)]
     pub normal: NormalOpts,
+    /// Threads, memory, progress.
+    #[command(flatten)]
+    pub common: Common,
+}
+
+/// `scanflow merge`.
+#[derive(Args, Debug)]
+pub struct MergeArgs {
+    /// The work directory the shards shared (their --work-dir).
+    pub work_dir: PathBuf,
+    /// Output mesh (binary PLY).
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Keep the work directory after success (default: removed, as a run in one process
+    /// removes its own).
+    #[arg(long)]
+    pub keep_work: bool,
     /// Threads, memory, progress.
     #[command(flatten)]
     pub common: Common,

@@ -11,12 +11,13 @@ use scanflow::exec::{Ctx, default_mem_bytes, parse_mem};
 use scanflow::normals::{NormalParams, NormalsMode};
 use scanflow::pipeline::ReconParams;
 use scanflow::pipeline::ingest::IngestParams;
+use scanflow::pipeline::shard::Shard;
 use scanflow::recon::{DEPTHS, PointWeight};
 use scanflow::synth::{BUMPY_RELIEF, Shape};
 
 use super::args::{
     CheckArgs, Cli, Cmd, Common, DemoArgs, HexcheckArgs, HexmeshArgs, InfoArgs, IngestArgs,
-    NormalOpts, ReconstructArgs, SynthArgs,
+    MergeArgs, NormalOpts, ReconstructArgs, SynthArgs,
 };
 pub use super::fit::FitConfig;
 use super::paths;
@@ -68,6 +69,8 @@ pub enum Config {
     Spectral(SpectralConfig),
     /// `fit`.
     Fit(FitConfig),
+    /// `merge`.
+    Merge(MergeConfig),
 }
 
 impl Config {
@@ -86,6 +89,7 @@ impl Config {
             Cmd::Resample(a) => Config::Spectral(SpectralConfig::resample(a)?),
             Cmd::Spectrum(a) => Config::Spectral(SpectralConfig::spectrum(a)?),
             Cmd::Fit(a) => Config::Fit(FitConfig::new(a)?),
+            Cmd::Merge(a) => Config::Merge(MergeConfig::new(a)?),
         })
     }
 }
@@ -451,6 +455,14 @@ impl ReconstructConfig {
             None => None,
         };
         let points = Points::new(a.inputs, a.conf, &a.normal)?;
+        if let Some(text) = &a.shard {
+            params.shard = Shard::parse(text, |k| std::env::var(k).ok())?;
+            if let Points::Files(..) = points {
+                bail!(
+                    "--shard {text}: shards reconstruct a store: ingest the point files once first (scanflow ingest FILES -o STORE, the job script's first step), then give the store to every shard"
+                );
+            }
+        }
         Ok(ReconstructConfig {
             run,
             points,
@@ -458,6 +470,41 @@ impl ReconstructConfig {
             params,
             keep_work: a.keep_work,
             hex,
+        })
+    }
+}
+
+/// `scanflow merge`.
+pub struct MergeConfig {
+    /// Threads, memory, progress.
+    pub run: RunConfig,
+    /// The shards' work directory.
+    pub work_dir: PathBuf,
+    /// The mesh to write.
+    pub output: PathBuf,
+    /// Keep the work directory after success.
+    pub keep_work: bool,
+}
+
+impl MergeConfig {
+    fn new(a: MergeArgs) -> Result<MergeConfig> {
+        let run = RunConfig::new(&a.common)?;
+        paths::output_file(&a.output, paths::PLY)?;
+        if !a.work_dir.is_dir() {
+            bail!("{}: no such work directory", a.work_dir.display());
+        }
+        if paths::inside(&a.output, &a.work_dir) {
+            bail!(
+                "-o {}: lies inside the work directory {}, which merge removes after success",
+                a.output.display(),
+                a.work_dir.display()
+            );
+        }
+        Ok(MergeConfig {
+            run,
+            work_dir: a.work_dir,
+            output: a.output,
+            keep_work: a.keep_work,
         })
     }
 }

@@ -20,6 +20,7 @@ pub fn run(c: &FitConfig, ctx: &Ctx) -> Result<FitStats> {
         work_dir: &c.work_dir,
         resume: false,
         keep_work: c.keep_work,
+        shared: false,
     };
     let command = match c.patches {
         Some(p) => format!(

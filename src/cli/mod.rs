@@ -34,6 +34,7 @@ mod fit_tiles;
 mod hex;
 mod info;
 mod ingest;
+mod merge;
 mod paths;
 mod reconstruct;
 mod report;
@@ -57,6 +58,7 @@ pub fn run(config: Config) -> Result<()> {
         Config::Demo(c) => demo::run(&c, &start(&c.run)?),
         Config::Spectral(c) => spectral::run(&c, &start(&c.run)?),
         Config::Fit(c) => fit::run(&c, &start(&c.run)?),
+        Config::Merge(c) => merge::run(&c, &start(&c.run)?),
         Config::Hexmesh(c) => hex::run(&c, &start(&c.run)?),
         Config::Hexcheck(a) => hex::check(&a),
     }

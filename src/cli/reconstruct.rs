@@ -24,7 +24,13 @@ use super::{paths, report, signals};
 pub fn run(c: &ReconstructConfig, ctx: &Ctx) -> Result<()> {
     let t0 = std::time::Instant::now();
     let st = reconstruct(ctx, &c.points, &c.output, &c.params, c.keep_work)?;
-    report::reconstruct(&st, &c.output, t0.elapsed().as_secs_f64());
+    let secs = t0.elapsed().as_secs_f64();
+    if c.params.shard.is_split() {
+        let work = workdir::resolve_shared(&c.params.work_dir, &c.output)?;
+        report::shard(&st, c.params.shard, &work, &c.output, secs);
+        return Ok(());
+    }
+    report::reconstruct(&st, &c.output, secs);
     if let Some(job) = &c.hex {
         let st = scanflow::pipeline::hexmesh::hexmesh(job, ctx)?;
         super::hex::summary(&st, &job.output)?;
@@ -48,6 +54,7 @@ pub fn reconstruct(
         work_dir: &params.work_dir,
         resume: params.resume,
         keep_work,
+        shared: params.shard.is_split(),
     };
     job.run(
         ctx,
@@ -75,6 +82,10 @@ pub struct WorkRun<'a> {
     pub resume: bool,
     /// `--keep-work`.
     pub keep_work: bool,
+    /// The work directory is shared with the other shards of a split run: joined, never
+    /// removed (by success or failure), and its temporary files left alone (another task
+    /// may be writing them); `merge` removes it.
+    pub shared: bool,
 }
 
 impl WorkRun<'_> {
@@ -106,12 +117,22 @@ impl WorkRun<'_> {
             }
         };
         let (mode, normal_params) = normals.map(|n| (n.mode, n.params)).unwrap_or_default();
-        let work = workdir::resolve(self.work_dir, output)?;
+        let work = if self.shared {
+            workdir::resolve_shared(self.work_dir, output)?
+        } else {
+            workdir::resolve(self.work_dir, output)?
+        };
         check_paths(&source, output, &work)?;
+        let identity = identity(&source, mode, &normal_params)?;
+        if self.shared {
+            let lease = workdir::join(&work, &identity)?;
+            return open_or_ingest(&source, &work, true, mode, normal_params, ctx)
+                .and_then(|store| body(&store, lease.dir()))
+                .map_err(Into::into);
+        }
         for p in atomic::remove_stale_temps(output, false) {
             log::info!("removed {}, left by a killed run", p.display());
         }
-        let identity = identity(&source, mode, &normal_params)?;
         let lease = workdir::claim(&work, &identity, self.resume)?;
         signals::set_note(Some(kept_note(&work)));
         let run = open_or_ingest(&source, &work, self.resume, mode, normal_params, ctx)

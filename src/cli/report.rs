@@ -8,7 +8,8 @@ use anyhow::Result;
 use scanflow::exec::{human_bytes, peak_rss_bytes};
 use scanflow::io::las_meta::class_name;
 use scanflow::metrics::CheckReport;
-use scanflow::pipeline::ReconStats;
+use scanflow::pipeline::shard::Shard;
+use scanflow::pipeline::{MergeStats, ReconStats};
 use scanflow::store::verify::VerifyReport;
 use scanflow::store::{FileInfo, IngestStats, LasInfo, Store};
 use scanflow::synth::{Shape, SynthReport};
@@ -85,6 +86,34 @@ pub fn reconstruct(st: &ReconStats, out: &Path, total_secs: f64) {
         st.leaves,
         st.leaves_refined,
         st.iso,
+        human_bytes(peak_rss_bytes())
+    );
+}
+
+/// A shard's summary: its share of the leaves and tiles, and what comes next.
+pub fn shard(st: &ReconStats, shard: Shard, work: &Path, out: &Path, total_secs: f64) {
+    outln!(
+        "shard {shard}: {} of {} leaves and {} of {} tiles done here (the others by other shards, or before a requeue), in {:.2} s, peak memory {}; once every shard has finished: scanflow merge {} -o {}",
+        st.leaves - st.leaves_reused,
+        st.leaves,
+        st.tiles,
+        st.tiles_total,
+        total_secs,
+        human_bytes(peak_rss_bytes()),
+        work.display(),
+        out.display()
+    );
+}
+
+/// `merge`'s summary.
+pub fn merge(st: &MergeStats, out: &Path) {
+    outln!(
+        "merged {} tiles: {} vertices, {} triangles into {} in {:.2} s, peak memory {}",
+        st.tiles,
+        st.vertices,
+        st.faces,
+        out.display(),
+        st.secs,
         human_bytes(peak_rss_bytes())
     );
 }

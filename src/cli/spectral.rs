@@ -241,6 +241,7 @@ pub fn run(c: &SpectralConfig, ctx: &Ctx) -> Result<()> {
         work_dir: &c.params.work_dir,
         resume: c.params.resume,
         keep_work: c.keep_work,
+        shared: false,
     };
     let opts = options(c);
     // The parameters with the work directory the run was given.

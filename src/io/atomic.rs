@@ -116,11 +116,50 @@ fn alive(pid: u32) -> bool {
     !proc.join("self").exists() || proc.join(pid.to_string()).exists()
 }
 
-/// The pid in a temporary name `NAME.tmp-<pid>[.faces]` of `name`, if `file` is one.
+/// The pid in a temporary name `NAME.tmp-<pid>[@<host>][.faces]` of `name`, if `file` is one
+/// made on this host (another host's process cannot be checked: it counts as alive).
 fn temp_pid(file: &str, name: &str) -> Option<u32> {
     let rest = file.strip_prefix(name)?.strip_prefix(".tmp-")?;
-    let digits = rest.strip_suffix(".faces").unwrap_or(rest);
+    let rest = rest.strip_suffix(".faces").unwrap_or(rest);
+    let digits = match rest.split_once('@') {
+        Some((digits, host)) if host == this_host() => digits,
+        Some(_) => return None,
+        None => rest,
+    };
     digits.parse().ok()
+}
+
+/// Whether temporary names carry the host (see [`tag_temps_with_host`]).
+static HOST_TAGGED: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// From now on, temporary names carry this host's name beside the pid
+/// (`NAME.tmp-<pid>@<host>`): for the shards of an array job, whose tasks on several hosts
+/// share one work directory and may have the same pid.
+pub fn tag_temps_with_host() {
+    HOST_TAGGED.store(true, std::sync::atomic::Ordering::Relaxed);
+}
+
+/// This host's name, letters, digits and `-` only (`_` for anything else); `unknown` where it
+/// cannot be read.
+pub fn this_host() -> &'static str {
+    static HOST: std::sync::OnceLock<String> = std::sync::OnceLock::new();
+    HOST.get_or_init(|| {
+        let name = std::fs::read_to_string("/proc/sys/kernel/hostname")
+            .ok()
+            .or_else(|| std::env::var("HOSTNAME").ok())
+            .map(|h| h.trim().to_string())
+            .filter(|h| !h.is_empty())
+            .unwrap_or_else(|| "unknown".into());
+        name.chars()
+            .map(|c| {
+                if c.is_ascii_alphanumeric() || c == '-' {
+                    c
+                } else {
+                    '_'
+                }
+            })
+            .collect()
+    })
 }
 
 /// Remove the temporary files and directories that killed processes left for `path` (its
@@ -194,9 +233,15 @@ pub fn with_suffix(path: &Path, suffix: &str) -> PathBuf {
     PathBuf::from(s)
 }
 
-/// The temporary name this process writes `path` under: `path` + `.tmp-<pid>`.
+/// The temporary name this process writes `path` under: `path` + `.tmp-<pid>`, and
+/// `@<host>` after [`tag_temps_with_host`].
 pub fn temp_name(path: &Path) -> PathBuf {
-    with_suffix(path, &format!(".tmp-{}", std::process::id()))
+    let pid = std::process::id();
+    if HOST_TAGGED.load(std::sync::atomic::Ordering::Relaxed) {
+        with_suffix(path, &format!(".tmp-{pid}@{}", this_host()))
+    } else {
+        with_suffix(path, &format!(".tmp-{pid}"))
+    }
 }
 
 /// Sync the directory holding `path`, so that a rename into it is durable. Best effort: some
@@ -403,6 +448,10 @@ mod tests {
         assert_eq!(temp_pid("m.ply.tmp-42.faces", "m.ply"), Some(42));
         assert_eq!(temp_pid("m.ply.tmp-x", "m.ply"), None);
         assert_eq!(temp_pid("n.ply.tmp-42", "m.ply"), None);
+        // Another host's process cannot be checked from here: never stale.
+        let here = format!("m.ply.tmp-42@{}.faces", this_host());
+        assert_eq!(temp_pid(&here, "m.ply"), Some(42));
+        assert_eq!(temp_pid("m.ply.tmp-42@not-this-host-x", "m.ply"), None);
         let d = tempfile::tempdir().unwrap();
         let out = d.path().join("m.ply");
         // A pid above Linux's largest (2^22) belongs to no live process.

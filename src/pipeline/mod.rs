@@ -8,6 +8,8 @@
 //! - [`reconstruct()`]: a store to a mesh: plan, coarse pass, leaf pass ([`recon`](crate::recon)),
 //!   then the tiles (`tiles`: blend and extract, fit and colour ([`surface`](crate::surface)),
 //!   weld and write).
+//! - [`shard`]: one task's slice of a run split over a cluster array job, and
+//!   [`merge()`]: the split run's tiles welded into the mesh one process writes.
 //! - [`global_solve`]: the single-solve reference the tests measure the two-level scheme
 //!   against.
 
@@ -18,14 +20,17 @@ pub mod fit_tiles;
 mod global;
 pub mod hexmesh;
 pub mod ingest;
+pub mod merge;
 mod points;
 pub mod reconstruct;
+pub mod shard;
 pub mod spectral;
 pub mod spectrum;
 mod tiles;
 pub mod workdir;
 
 pub use global::global_solve;
+pub use merge::{MergeStats, merge};
 pub use reconstruct::{ReconParams, ReconStats, reconstruct};
 
 #[cfg(test)]

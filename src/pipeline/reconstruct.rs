@@ -11,17 +11,21 @@ use std::time::Instant;
 use rayon::prelude::*;
 use serde::Serialize;
 
+use super::merge;
 use super::points::{PointSource, SORTED_POINT_BYTES};
+use super::shard::Claims;
+use super::shard::Shard;
 use super::tiles::{self, TileJob};
 use super::workdir::{self, WorkDir};
 use crate::error::{Error, Result};
 use crate::exec::Ctx;
 use crate::exec::budget::{Permit, Share};
-use crate::recon::checkpoint::{leaf_path, read_leaf, write_leaf};
+use crate::recon::checkpoint::{LeafSummary, leaf_path, read_leaf_summary, write_leaf};
+
 use crate::recon::pou::unit_for;
 use crate::recon::{
-    CoarseField, DEFAULT_ERROR, DEFAULT_MIN_POINTS, LeafRule, LeafSolvers, Moments, Plan,
-    PointWeight, fft_solve, refine_leaf,
+    CoarseField, DEFAULT_ERROR, DEFAULT_MIN_POINTS, LeafDetail, LeafRule, LeafSolvers, Moments,
+    Plan, PointWeight, fft_solve, refine_leaf,
     screen::{self, NOISE_KEY_BYTES, NoiseStats, ScreenBuilder},
     solve_coarse,
 };
@@ -70,6 +74,9 @@ pub struct ReconParams {
     /// Move each vertex onto the plane of its nearest input points (see
     /// [`crate::surface::FIT_NEIGHBOURS`]).
     pub fit: bool,
+    /// The slice of the work this process does ([`Shard::ALL`]: all of it, and the mesh; a
+    /// split run leaves the tiles for [`crate::pipeline::merge()`]).
+    pub shard: Shard,
 }
 
 impl ReconParams {
@@ -87,6 +94,7 @@ impl ReconParams {
             min_points: DEFAULT_MIN_POINTS,
             trim: false,
             gpu: crate::extract::gpu::GpuMode::Off,
+            shard: Shard::ALL,
         }
     }
 }
@@ -104,8 +112,11 @@ pub struct ReconStats {
     pub leaves_refined: usize,
     /// Leaves reused from the work directory.
     pub leaves_reused: usize,
-    /// Tiles extracted (tiles with no surface are skipped).
+    /// Tiles extracted or read back (tiles with no surface are skipped); in a split run, the
+    /// tiles this shard extracted.
     pub tiles: usize,
+    /// Tiles that can hold surface, extracted by this process or another shard.
+    pub tiles_total: usize,
     /// Iso-value.
     pub iso: f64,
     /// Screening weight α the solves used (0: unscreened).
@@ -132,7 +143,9 @@ pub struct ReconStats {
     pub secs: f64,
 }
 
-/// Reconstruct the surface of the points in `store` into the PLY mesh `out`.
+/// Reconstruct the surface of the points in `store` into the PLY mesh `out`; a split run
+/// (`params.shard`) does its slice of the leaves and tiles and leaves the mesh to
+/// [`merge()`](crate::pipeline::merge()) (`out` is not written).
 pub fn reconstruct(
     store: &Store,
     out: &Path,
@@ -140,6 +153,10 @@ pub fn reconstruct(
     ctx: &Ctx,
 ) -> Result<ReconStats> {
     let t0 = Instant::now();
+    if params.shard.is_split() {
+        // Other tasks, maybe on other hosts, write into the same work directory.
+        crate::io::atomic::tag_temps_with_host();
+    }
     let mut plan = plan_run(store, params, ctx)?;
     let dirs = workdir::prepare(store, &plan, params)?;
     let mut coarse = coarse_pass(store, &plan, params.point_weight, ctx)?;
@@ -166,11 +183,28 @@ pub fn reconstruct(
         unit: leaves.unit,
         leaves_dir: &dirs.leaves,
         tiles_dir: &dirs.tiles,
+        claims_dir: &dirs.claims,
         with_color,
         with_intensity,
         input: &store.dir,
     };
-    let ts = tiles::run(&job, points, out, ctx)?;
+    let nonempty = tiles::nonempty_tiles(&job);
+    let split = params.shard.is_split();
+    if split {
+        // What `merge` welds; every shard writes the same description.
+        merge::describe(
+            &params.work_dir,
+            &merge::MergeDescription {
+                plan,
+                iso: leaves.iso,
+                with_color,
+                with_intensity,
+                input: store.dir.clone(),
+                tiles: nonempty.clone(),
+            },
+        )?;
+    }
+    let ts = tiles::run(&job, &nonempty, points, (!split).then_some(out), ctx)?;
     Ok(ReconStats {
         vertices: ts.vertices,
         faces: ts.faces,
@@ -178,6 +212,7 @@ pub fn reconstruct(
         leaves_refined: leaves.refined.len(),
         leaves_reused: leaves.reused,
         tiles: ts.tiles,
+        tiles_total: nonempty.len(),
         iso: leaves.iso,
         point_weight: plan.point_weight,
         noise_voxels: coarse.noise_voxels,
@@ -339,13 +374,11 @@ struct LeafPass {
     iterations: u64,
 }
 
-/// One leaf's result: its iso sum and count, whether it was read back, whether it is refined,
-/// its screened solve's iterations.
-type LeafOutcome = (f64, u64, bool, bool, u32);
-
 /// Pass 2: the occupied leaves of the coarse pass (taken from it), in Morton order, solved
-/// in parallel waves, spilled to the work directory. Leaves a resumed run checkpointed
-/// already are read back.
+/// in parallel waves, spilled to the work directory. Leaves checkpointed already (by a
+/// resumed run, or by another shard) are summed from their checkpoints' headers. A shard
+/// visits the leaves in its order ([`Shard::order`]); the iso-value is summed in Morton order
+/// whoever solved each leaf.
 fn leaf_pass(
     store: &Store,
     plan: &Plan,
@@ -361,96 +394,120 @@ fn leaf_pass(
     let stage = ctx
         .progress
         .stage("leaves", Some(leaves.len() as u64), "leaves");
-    let (mut iso_sum, mut iso_count, mut reused) = (0.0, 0u64, 0);
     let (mut solved, mut iterations) = (0, 0u64);
-    let mut refined = BTreeSet::new();
     let rule = LeafRule {
         tolerance: params.error * store.manifest.bounds.diagonal(),
         min_points: params.min_points,
     };
-    let dm = plan.detail_n();
     let solvers = LeafSolvers::new(plan);
     // Fixed point for the blend (`extract::field`): the coarse values within 2^21 units;
     // leaf details are stored in it.
     let unit = unit_for(coarse.max_abs());
+    let split = params.shard.is_split();
+    let reuse = params.resume || split;
+    let claims = Claims::new(&dirs.claims);
+    let order = params.shard.order(leaves.len());
+    let mut outcomes: Vec<Option<(f64, u64, bool)>> = vec![None; leaves.len()];
+    // A split run claims its leaves, then does every one still missing (see `shard`).
+    let passes: &[bool] = if split { &[true, false] } else { &[false] };
     let wave = 2 * ctx.threads();
-    for wave_keys in leaves.chunks(wave) {
-        let done: Vec<bool> = wave_keys
-            .iter()
-            .map(|&k| params.resume && leaf_path(&dirs.leaves, k).exists())
-            .collect();
-        let wanted: Vec<usize> = wave_keys
-            .iter()
-            .zip(&done)
-            .filter(|(_, done)| !**done)
-            .flat_map(|(&k, _)| src.cells_for_leaf(k))
-            .collect();
-        src.preload(&wanted, &ctx.pool)?;
-        let mut todo = Vec::new();
-        for (&k, &done) in wave_keys.iter().zip(&done) {
-            todo.push((k, if done { None } else { Some(src.gather(k)?) }));
-        }
-        let pts_bytes: u64 = todo
-            .iter()
-            .map(|(_, p)| {
-                p.as_ref()
-                    .map_or(0, |p| p.pos.len() as u64 * SORTED_POINT_BYTES)
-            })
-            .sum();
-        // At most one solve a worker runs at once, and no more at once than fit in what is
-        // free (at least one).
-        let free = ctx.budget.total().saturating_sub(ctx.budget.used());
-        let at_once = (free.saturating_sub(pts_bytes) / fine_bytes.max(1))
-            .clamp(1, ctx.threads() as u64) as usize;
-        let bytes = fine_bytes * todo.len().min(at_once) as u64 + pts_bytes;
-        // Over the whole budget it is an error that names the sizes; otherwise it is admitted
-        // without waiting on the permits this thread holds.
-        let _permit = if bytes > ctx.budget.total() {
-            Some(ctx.budget.acquire(bytes, "a wave of leaf solves")?)
-        } else {
-            tiles::admit_now(ctx, bytes)
-        };
-        let group = if at_once < ctx.threads() {
-            at_once
-        } else {
-            todo.len().max(1)
-        };
-        let mut res: Vec<Result<LeafOutcome>> = Vec::with_capacity(todo.len());
-        for g in todo.chunks(group) {
-            res.extend(ctx.pool.install(|| {
-                g.par_iter()
-                    .map(|(k, pts)| match pts {
-                        None => {
-                            let d = read_leaf(&dirs.leaves, *k, dm)?;
-                            Ok((d.iso_sum, d.iso_count, true, d.detail.is_some(), 0))
-                        }
-                        Some(p) => {
+    for &claiming in passes {
+        let mut next = 0;
+        loop {
+            let mut wave_idx = Vec::with_capacity(wave);
+            while next < order.len() && wave_idx.len() < wave {
+                let (i, k) = (order[next], leaves[order[next]]);
+                next += 1;
+                if outcomes[i].is_some() || (reuse && leaf_path(&dirs.leaves, k).exists()) {
+                    continue;
+                }
+                if claiming && !claims.take(&format!("L{}", k.file_name()))? {
+                    continue;
+                }
+                wave_idx.push(i);
+            }
+            if wave_idx.is_empty() {
+                break;
+            }
+            let wanted: Vec<usize> = wave_idx
+                .iter()
+                .flat_map(|&i| src.cells_for_leaf(leaves[i]))
+                .collect();
+            src.preload(&wanted, &ctx.pool)?;
+            let mut todo = Vec::with_capacity(wave_idx.len());
+            for &i in &wave_idx {
+                todo.push((leaves[i], src.gather(leaves[i])?));
+            }
+            let pts_bytes: u64 = todo
+                .iter()
+                .map(|(_, p)| p.pos.len() as u64 * SORTED_POINT_BYTES)
+                .sum();
+            // At most one solve a worker runs at once, and no more at once than fit in what
+            // is free (at least one).
+            let free = ctx.budget.total().saturating_sub(ctx.budget.used());
+            let at_once = (free.saturating_sub(pts_bytes) / fine_bytes.max(1))
+                .clamp(1, ctx.threads() as u64) as usize;
+            let bytes = fine_bytes * todo.len().min(at_once) as u64 + pts_bytes;
+            // Over the whole budget it is an error that names the sizes; otherwise it is
+            // admitted without waiting on the permits this thread holds.
+            let _permit = if bytes > ctx.budget.total() {
+                Some(ctx.budget.acquire(bytes, "a wave of leaf solves")?)
+            } else {
+                tiles::admit_now(ctx, bytes)
+            };
+            let group = if at_once < ctx.threads() {
+                at_once
+            } else {
+                todo.len().max(1)
+            };
+            let mut res: Vec<Result<LeafDetail>> = Vec::with_capacity(todo.len());
+            for g in todo.chunks(group) {
+                res.extend(ctx.pool.install(|| {
+                    g.par_iter()
+                        .map(|(k, p)| {
                             let d = refine_leaf(plan, unit, &solvers, *k, p, coarse, &rule);
                             write_leaf(&dirs.leaves, *k, &d)?;
-                            Ok((
-                                d.iso_sum,
-                                d.iso_count,
-                                false,
-                                d.detail.is_some(),
-                                d.iterations,
-                            ))
-                        }
-                    })
-                    .collect::<Vec<_>>()
-            }));
-        }
-        for (r, k) in res.into_iter().zip(wave_keys) {
-            let (s, c, was_reused, is_refined, its) = r?;
-            iterations += its as u64;
-            solved += (is_refined && !was_reused) as usize;
-            iso_sum += s;
-            iso_count += c;
-            reused += was_reused as usize;
-            if is_refined {
-                refined.insert(*k);
+                            Ok(d)
+                        })
+                        .collect::<Vec<_>>()
+                }));
             }
+            for (r, &i) in res.into_iter().zip(&wave_idx) {
+                let d = r?;
+                iterations += d.iterations as u64;
+                solved += d.detail.is_some() as usize;
+                outcomes[i] = Some((d.iso_sum, d.iso_count, d.detail.is_some()));
+            }
+            stage.inc(wave_idx.len() as u64);
         }
-        stage.inc(wave_keys.len() as u64);
+    }
+    // The leaves solved before (a resumed run) or by other shards: from their checkpoints'
+    // headers.
+    let rest: Vec<usize> = (0..leaves.len())
+        .filter(|&i| outcomes[i].is_none())
+        .collect();
+    let sums: Vec<Result<LeafSummary>> = ctx.pool.install(|| {
+        rest.par_iter()
+            .map(|&i| read_leaf_summary(&dirs.leaves, leaves[i]))
+            .collect()
+    });
+    for (&i, r) in rest.iter().zip(sums) {
+        let d = r?;
+        outcomes[i] = Some((d.iso_sum, d.iso_count, d.has_detail));
+    }
+    let reused = rest.len();
+    stage.inc(rest.len() as u64);
+    // In Morton order, as one process sums them: the same iso-value for any shard count.
+    let (mut iso_sum, mut iso_count) = (0.0, 0u64);
+    let mut refined = BTreeSet::new();
+    for (o, k) in outcomes.into_iter().zip(&leaves) {
+        let (s, c, is_refined) =
+            o.ok_or_else(|| Error::Internal(format!("leaf {k:?} was not visited")))?;
+        iso_sum += s;
+        iso_count += c;
+        if is_refined {
+            refined.insert(*k);
+        }
     }
     stage.finish(None);
     let iso = if iso_count > 0 {

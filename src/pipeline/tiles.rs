@@ -12,6 +12,7 @@ use rayon::prelude::*;
 use super::details::DetailCache;
 use super::points::PointSource;
 use super::reconstruct::ReconParams;
+use super::shard::Claims;
 use crate::error::{Error, Result};
 use crate::exec::Ctx;
 use crate::exec::budget::{Permit, Share};
@@ -58,6 +59,8 @@ pub struct TileJob<'a> {
     pub leaves_dir: &'a Path,
     /// Tile checkpoints.
     pub tiles_dir: &'a Path,
+    /// The shards' claims (a split run).
+    pub claims_dir: &'a Path,
     /// Whether the output carries colours.
     pub with_color: bool,
     /// Whether the output carries intensities.
@@ -89,15 +92,21 @@ type LoadedTile = (u64, [i64; 3], Option<Vec<(CellKey, Arc<Detail>)>>);
 /// The point source the fit and colours read, shared by the workers.
 type SharedPoints<'a> = Option<Mutex<PointSource<'a>>>;
 
-/// Extract, fit, weld and write every tile of `job` into the PLY mesh `out`. `points` is the
-/// input points when the fit or colours need them.
-pub fn run(job: &TileJob, points: SharedPoints, out: &Path, ctx: &Ctx) -> Result<TileStats> {
+/// Extract, fit and checkpoint the tiles of `job` that its shard visits (`job.params.shard`:
+/// every tile for the whole run), in waves; with `out`, weld and write them into the PLY mesh
+/// `out` as they come (the whole run only). `points` is the input points when the fit or
+/// colours need them. `tiles` is the non-empty tiles ([`nonempty_tiles`]).
+pub fn run(
+    job: &TileJob,
+    tiles: &[u64],
+    points: SharedPoints,
+    out: Option<&Path>,
+    ctx: &Ctx,
+) -> Result<TileStats> {
     let plan = job.plan;
-    let ntiles_axis = plan.fine_cells / plan.tile;
-    let tiles_total = ntiles_axis.pow(3);
+    let shard = job.params.shard;
     // The tiles work relative to the cube's lower corner (on its lattice, `types::Cube`), so
     // that translated inputs give the same numbers; the writer adds the corner back.
-    let origin = plan.cube.origin;
     let geom = GridGeom {
         origin: [0.0; 3],
         h: plan.spacing,
@@ -107,17 +116,15 @@ pub fn run(job: &TileJob, points: SharedPoints, out: &Path, ctx: &Ctx) -> Result
     if let Some(g) = &gpu {
         log::info!("extracting tiles on the GPU: {}", g.adapter_name());
     }
-    // Both welder callbacks write to the one writer.
-    // Vertices are written in float32 only where it keeps the input's resolution (georeferenced
-    // coordinates get float64; see `io::mesh_write`).
-    let format = VertexFormat::for_cube(
-        plan.cube.origin,
-        plan.cube.size,
-        job.with_color,
-        job.with_intensity,
-    );
-    let writer = std::cell::RefCell::new(MeshPlyWriter::create_format(out, format)?);
-    let mut welder = Welder::new();
+    let mut sink = match out {
+        Some(out) => Some(MeshSink::create(
+            plan,
+            job.with_color,
+            job.with_intensity,
+            out,
+        )?),
+        None => None,
+    };
     // Tiles in Morton order reuse the leaves of their neighbours: the cache keeps twice the
     // leaves of the last wave (the next wave's tiles are its neighbours), within its share of
     // the budget.
@@ -127,81 +134,191 @@ pub fn run(job: &TileJob, points: SharedPoints, out: &Path, ctx: &Ctx) -> Result
     let _detail_permit = ctx
         .budget
         .acquire_now(detail_cap, "the leaf detail cache")?;
-    let stage = ctx.progress.stage("tiles", Some(tiles_total), "tiles");
+    let stage = ctx
+        .progress
+        .stage("tiles", Some(tiles.len() as u64), "tiles");
     let sizes = WaveSizes {
         tiles: 2 * ctx.threads(),
         tile_bytes: (plan.tile + 1).pow(3) * TILE_NODE_BYTES,
         detail_bytes: details.detail_bytes(),
     };
     let mut tiles_done = 0usize;
-    let mut t = 0u64;
-    let last_tile = |key: EdgeKey| -> u64 {
-        let (node, _axis) = geom.decode_edge(key);
-        let c = node.map(|v| (v / plan.tile).min(ntiles_axis - 1) as u32);
-        morton3(c)
+    let order = shard.order(tiles.len());
+    let claims = Claims::new(job.claims_dir);
+    // A split run claims its tiles, then does every one still missing (see `shard`); a
+    // tile checkpointed by another shard is left for `merge`.
+    let passes: &[bool] = if shard.is_split() {
+        &[true, false]
+    } else {
+        &[false]
     };
-    while t < tiles_total {
-        let free = ctx.budget.total().saturating_sub(ctx.budget.used());
-        let (wave_tiles, wave_bytes) = next_wave(job, &mut t, tiles_total, &sizes, free);
-        let _permit = admit_now(ctx, wave_bytes);
-        details.fit(2 * wave_tiles.iter().map(|w| w.2.len()).sum::<usize>());
-        let (loaded, near_pts) = load_wave(job, &wave_tiles, &points, &mut details, ctx)?;
-        let near_bytes: u64 = near_pts.iter().flatten().map(near_points_bytes).sum();
-        let _near_permit = admit_now(ctx, near_bytes);
-        let meshes = match gpu.as_mut() {
-            Some(g) => {
-                let shared = GpuWave {
-                    job,
-                    points: &points,
-                    loaded: &loaded,
-                    near_pts: &near_pts,
-                    geom: &geom,
-                };
-                extract_gpu(&shared, g, &mut gpu_totals, &ctx.pool)?
+    let mut visited = vec![false; tiles.len()];
+    for &claiming in passes {
+        let mut next = 0usize;
+        loop {
+            let free = ctx.budget.total().saturating_sub(ctx.budget.used());
+            let pick = Pick {
+                tiles,
+                order: &order,
+                visited: &mut visited,
+                claims: (claiming).then_some(&claims),
+            };
+            let (wave_tiles, wave_bytes) = next_wave(job, pick, &mut next, &sizes, free)?;
+            if wave_tiles.is_empty() {
+                break;
             }
-            None => extract_cpu(job, &points, &loaded, &near_pts, &geom, &ctx.pool),
-        };
-        for m in meshes {
-            let (tt, mesh) = m?;
-            welder.add_tile(
-                tt,
-                &mesh,
-                last_tile,
-                |_, i, p| {
-                    writer.borrow_mut().vertex_with(
-                        [0, 1, 2].map(|d| p[d] + origin[d]),
-                        mesh.colors.get(i).copied(),
-                        mesh.intensity.get(i).copied(),
-                    )
-                },
-                |tri| writer.borrow_mut().triangle(tri),
-            )?;
-            tiles_done += 1;
+            let _permit = admit_now(ctx, wave_bytes);
+            details.fit(2 * wave_tiles.iter().map(|w| w.2.len()).sum::<usize>());
+            let (loaded, near_pts) = load_wave(job, &wave_tiles, &points, &mut details, ctx)?;
+            let near_bytes: u64 = near_pts.iter().flatten().map(near_points_bytes).sum();
+            let _near_permit = admit_now(ctx, near_bytes);
+            let meshes = match gpu.as_mut() {
+                Some(g) => {
+                    let shared = GpuWave {
+                        job,
+                        points: &points,
+                        loaded: &loaded,
+                        near_pts: &near_pts,
+                        geom: &geom,
+                    };
+                    extract_gpu(&shared, g, &mut gpu_totals, &ctx.pool)?
+                }
+                None => extract_cpu(job, &points, &loaded, &near_pts, &geom, &ctx.pool),
+            };
+            for m in meshes {
+                let (tt, mesh) = m?;
+                if let Some(sink) = sink.as_mut() {
+                    sink.add(tt, &mesh)?;
+                }
+                tiles_done += 1;
+            }
+            stage.inc(wave_tiles.len() as u64);
         }
-        stage.inc((t - stage.done()).min(tiles_total));
+    }
+    if shard.is_split() {
+        stage.inc(visited.iter().filter(|v| !**v).count() as u64);
     }
     stage.finish(None);
     if gpu.is_some() {
         gpu_totals.log();
     }
-    let writer = writer.into_inner();
-    if writer.triangles() == 0 {
-        // Dropping the writer removes its temporary files: nothing appears under `out`.
-        return Err(Error::input(
-            job.input,
-            format!(
-                "no surface: the field never crosses its iso-value {} inside the cube, so the mesh would be empty (do the points and normals describe a surface? at depth {}, a voxel is {:e} across)",
-                job.iso, job.params.depth, plan.spacing
-            ),
-        ));
-    }
-    let ws = writer.finish()?;
+    let (vertices, faces, peak_frontier) = match sink {
+        Some(sink) => sink.finish(job.input, job.iso, job.params.depth)?,
+        None => (0, 0, 0),
+    };
     Ok(TileStats {
-        vertices: ws.vertices,
-        faces: ws.faces,
+        vertices,
+        faces,
         tiles: tiles_done,
-        peak_frontier: welder.peak_frontier(),
+        peak_frontier,
     })
+}
+
+/// The tiles that can hold surface, by Morton index: those a refined leaf reaches or over which
+/// the coarse solution crosses the iso-value. Every one is extracted and checkpointed (its
+/// mesh may still be empty); the others are skipped by every shard and by `merge`.
+pub fn nonempty_tiles(job: &TileJob) -> Vec<u64> {
+    let plan = job.plan;
+    let ntiles_axis = plan.fine_cells / plan.tile;
+    (0..ntiles_axis.pow(3))
+        .filter(|&t| {
+            let (lo, hi) = tile_box(plan, t);
+            let near = leaves_near(plan, job.refined, lo, hi);
+            let (mn, mx) = job.coarse.range(lo, hi);
+            !(near.is_empty() && (mn as f64 > job.iso || (mx as f64) < job.iso))
+        })
+        .collect()
+}
+
+/// The lowest and highest fine nodes of tile `t` (Morton index).
+fn tile_box(plan: &Plan, t: u64) -> ([i64; 3], [i64; 3]) {
+    let c = demorton3(t);
+    let lo = c.map(|v| v as i64 * plan.tile as i64);
+    (lo, lo.map(|v| v + plan.tile as i64))
+}
+
+/// Tiles welded in Morton order and streamed into a PLY mesh: the end of a run in one
+/// process, and `merge`'s for a split run, so both write the same bytes.
+pub(super) struct MeshSink {
+    writer: std::cell::RefCell<MeshPlyWriter>,
+    welder: Welder,
+    /// The cube's lower corner, which the writer adds back to the tiles' positions.
+    origin: [f64; 3],
+    geom: GridGeom,
+    tile: u64,
+    ntiles_axis: u64,
+    spacing: f64,
+}
+
+impl MeshSink {
+    /// A sink writing `out` for tiles of `plan`, with colours or intensities where the points
+    /// have them.
+    pub(super) fn create(
+        plan: &Plan,
+        with_color: bool,
+        with_intensity: bool,
+        out: &Path,
+    ) -> Result<MeshSink> {
+        // Vertices are written in float32 only where it keeps the input's resolution
+        // (georeferenced coordinates get float64; see `io::mesh_write`).
+        let format =
+            VertexFormat::for_cube(plan.cube.origin, plan.cube.size, with_color, with_intensity);
+        Ok(MeshSink {
+            writer: std::cell::RefCell::new(MeshPlyWriter::create_format(out, format)?),
+            welder: Welder::new(),
+            origin: plan.cube.origin,
+            geom: GridGeom {
+                origin: [0.0; 3],
+                h: plan.spacing,
+                n: plan.fine_cells,
+            },
+            tile: plan.tile,
+            ntiles_axis: plan.fine_cells / plan.tile,
+            spacing: plan.spacing,
+        })
+    }
+
+    /// Weld tile `tt`'s mesh (tiles come in increasing Morton order) and write what is final.
+    pub(super) fn add(&mut self, tt: u64, mesh: &TileMesh) -> Result<()> {
+        let (geom, tile, n, origin) = (self.geom, self.tile, self.ntiles_axis, self.origin);
+        let last_tile = |key: EdgeKey| -> u64 {
+            let (node, _axis) = geom.decode_edge(key);
+            morton3(node.map(|v| (v / tile).min(n - 1) as u32))
+        };
+        // Both welder callbacks write to the one writer.
+        let writer = &self.writer;
+        self.welder.add_tile(
+            tt,
+            mesh,
+            last_tile,
+            |_, i, p| {
+                writer.borrow_mut().vertex_with(
+                    [0, 1, 2].map(|d| p[d] + origin[d]),
+                    mesh.colors.get(i).copied(),
+                    mesh.intensity.get(i).copied(),
+                )
+            },
+            |tri| writer.borrow_mut().triangle(tri),
+        )
+    }
+
+    /// Complete the mesh: vertices, faces and the welder's largest frontier. A mesh without a
+    /// triangle is an error naming `input` (nothing appears under the output's name).
+    pub(super) fn finish(self, input: &Path, iso: f64, depth: u32) -> Result<(u64, u64, usize)> {
+        let writer = self.writer.into_inner();
+        if writer.triangles() == 0 {
+            // Dropping the writer removes its temporary files.
+            return Err(Error::input(
+                input,
+                format!(
+                    "no surface: the field never crosses its iso-value {iso} inside the cube, so the mesh would be empty (do the points and normals describe a surface? at depth {depth}, a voxel is {:e} across)",
+                    self.spacing
+                ),
+            ));
+        }
+        let ws = writer.finish()?;
+        Ok((ws.vertices, ws.faces, self.welder.peak_frontier()))
+    }
 }
 
 /// How a wave of tiles is sized: at most `tiles` tiles, each holding `tile_bytes` while its
@@ -212,43 +329,60 @@ struct WaveSizes {
     detail_bytes: u64,
 }
 
-/// The next wave of non-empty tiles from Morton index `*t` on (advanced past them), and the
+/// Which tiles a wave takes: the non-empty `tiles` in the shard's `order`, those not
+/// `visited` yet (marked as taken); in a split run those without a checkpoint, and in its
+/// first pass only those this process can claim.
+struct Pick<'p> {
+    tiles: &'p [u64],
+    order: &'p [usize],
+    visited: &'p mut [bool],
+    claims: Option<&'p Claims>,
+}
+
+/// The next wave of tiles from `pick.order[*next..]` (`*next` advanced past them), and the
 /// bytes it holds: at most `sizes.tiles` tiles, as many as fit in `free` bytes with the
-/// distinct leaf details they touch, and at least one. A tile is empty when no refined leaf
-/// reaches it and the coarse solution does not cross the iso-value over it. Which tiles share
-/// a wave never changes the output: tiles are welded and written in Morton order.
+/// distinct leaf details they touch, and at least one (none when no tile is left). Which
+/// tiles share a wave never changes the output: tiles are welded and written in Morton
+/// order.
 fn next_wave(
     job: &TileJob,
-    t: &mut u64,
-    tiles_total: u64,
+    pick: Pick,
+    next: &mut usize,
     sizes: &WaveSizes,
     free: u64,
-) -> (Vec<WaveTile>, u64) {
+) -> Result<(Vec<WaveTile>, u64)> {
     let plan = job.plan;
+    let split = job.params.shard.is_split();
     let mut wave_tiles = Vec::new();
     let mut leaves = HashSet::new();
     let mut bytes = 0u64;
-    while *t < tiles_total && wave_tiles.len() < sizes.tiles {
-        let c = demorton3(*t);
-        let lo = c.map(|v| v as i64 * plan.tile as i64);
-        let hi = lo.map(|v| v + plan.tile as i64);
-        let near = leaves_near(plan, job.refined, lo, hi);
-        let (mn, mx) = job.coarse.range(lo, hi);
-        let empty = near.is_empty() && (mn as f64 > job.iso || (mx as f64) < job.iso);
-        if !empty {
-            let new_leaves = near.iter().filter(|k| !leaves.contains(*k)).count() as u64;
-            let more = sizes.tile_bytes + new_leaves * sizes.detail_bytes;
-            if !wave_tiles.is_empty() && bytes + more > free {
-                // The tile opens the next wave.
-                break;
-            }
-            bytes += more;
-            leaves.extend(near.iter().copied());
-            wave_tiles.push((*t, lo, near));
+    while *next < pick.order.len() && wave_tiles.len() < sizes.tiles {
+        let i = pick.order[*next];
+        let t = pick.tiles[i];
+        if pick.visited[i] || (split && tile_path(job.tiles_dir, t).exists()) {
+            *next += 1;
+            continue;
         }
-        *t += 1;
+        let (lo, hi) = tile_box(plan, t);
+        let near = leaves_near(plan, job.refined, lo, hi);
+        let new_leaves = near.iter().filter(|k| !leaves.contains(*k)).count() as u64;
+        let more = sizes.tile_bytes + new_leaves * sizes.detail_bytes;
+        if !wave_tiles.is_empty() && bytes + more > free {
+            // The tile opens the next wave.
+            break;
+        }
+        *next += 1;
+        if let Some(c) = pick.claims
+            && !c.take(&format!("T{t}"))?
+        {
+            continue;
+        }
+        pick.visited[i] = true;
+        bytes += more;
+        leaves.extend(near.iter().copied());
+        wave_tiles.push((t, lo, near));
     }
-    (wave_tiles, bytes)
+    Ok((wave_tiles, bytes))
 }
 
 /// Bytes held by the input points `p` of a tile.

@@ -32,6 +32,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use super::ingest::{StoreSource, WORK_STORE};
+use super::merge::MERGE_FILE;
 use super::reconstruct::ReconParams;
 use crate::error::{Error, IoContext, Result};
 use crate::io::atomic::{self, Durability};
@@ -42,6 +43,9 @@ use crate::store::manifest::MANIFEST;
 
 /// The file that marks a directory as a scanflow work directory, created first.
 pub const MARKER: &str = ".scanflow-work";
+
+/// What the marker says.
+const MARKER_TEXT: &[u8] = b"scanflow work directory: scanflow removes it when the run succeeds\n";
 
 /// The run's identity: inputs, options and version.
 const RUN_FILE: &str = "run.json";
@@ -54,6 +58,14 @@ const LEAVES: &str = "leaves";
 
 /// Tile checkpoints.
 const TILES: &str = "tiles";
+
+/// The shards' claims on work items.
+const CLAIMS: &str = "claims";
+
+/// The tile checkpoints of the work directory `dir`.
+pub fn tiles_dir(dir: &Path) -> PathBuf {
+    dir.join(TILES)
+}
 
 /// Spectral patch checkpoints.
 const PATCHES: &str = crate::pipeline::spectral::PATCHES_DIR;
@@ -89,6 +101,19 @@ pub fn resolve(requested: &Path, output: &Path) -> Result<PathBuf> {
             Ok(requested.join(atomic::with_suffix(Path::new(name), ".work")))
         }
     }
+}
+
+/// [`resolve`] for the shards of a split run, which arrive together: an existing empty
+/// directory is taken too, since it is what another shard's [`join`] shows between making the
+/// directory and marking it (or one the job script made for the run).
+pub fn resolve_shared(requested: &Path, output: &Path) -> Result<PathBuf> {
+    let empty = std::fs::read_dir(requested)
+        .map(|mut d| d.next().is_none())
+        .unwrap_or(false);
+    if empty {
+        return Ok(requested.to_path_buf());
+    }
+    resolve(requested, output)
 }
 
 /// Whether `dir` is a work directory scanflow made.
@@ -282,16 +307,72 @@ pub fn claim(dir: &Path, identity: &RunIdentity, resume: bool) -> Result<Lease> 
         }
         std::fs::create_dir(dir)
             .map_err(|e| Error::input(dir, format!("cannot create the work directory: {e}")))?;
-        atomic::write(
-            &dir.join(MARKER),
-            b"scanflow work directory: scanflow removes it when the run succeeds\n",
-            Durability::Synced,
-        )?;
+        atomic::write(&dir.join(MARKER), MARKER_TEXT, Durability::Synced)?;
     }
     if !run_file.exists() {
         let text = serde_json::to_string_pretty(identity)
             .map_err(|e| Error::Internal(format!("{RUN_FILE}: {e}")))?;
         atomic::write(&run_file, text.as_bytes(), Durability::Synced)?;
+    }
+    Ok(Lease {
+        dir: dir.to_path_buf(),
+    })
+}
+
+/// Join the work directory `dir` shared by the shards of a split run of `identity`: the
+/// first task to arrive makes and marks it, the others find it; every task checks the run
+/// description against its own. Nothing in it is removed (another task may be writing
+/// there).
+///
+/// The description is published with `link(2)`, which fails when the name exists, so that two
+/// tasks arriving together never both write it and a task never reads half of it; both
+/// primitives, `mkdir(2)` and `link(2)`, are atomic on NFS.
+pub fn join(dir: &Path, identity: &RunIdentity) -> Result<Lease> {
+    match std::fs::create_dir(dir) {
+        Ok(()) => {}
+        Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists && dir.is_dir() => {}
+        Err(e) => {
+            return Err(Error::input(
+                dir,
+                format!("cannot create the work directory: {e}"),
+            ));
+        }
+    }
+    // Created in place, not renamed into it: between the directory and its marker, the other
+    // shards must see it empty ([`resolve_shared`]), never holding a temporary file.
+    match std::fs::File::create_new(dir.join(MARKER)) {
+        Ok(mut f) => {
+            use std::io::Write;
+            f.write_all(MARKER_TEXT).with_path(dir.join(MARKER))?;
+        }
+        Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
+        Err(e) => return Err(Error::io(dir.join(MARKER), e)),
+    }
+    let run_file = dir.join(RUN_FILE);
+    if !run_file.exists() {
+        let text = serde_json::to_string_pretty(identity)
+            .map_err(|e| Error::Internal(format!("{RUN_FILE}: {e}")))?;
+        let tmp = atomic::temp_name(&run_file);
+        std::fs::write(&tmp, text.as_bytes()).with_path(&tmp)?;
+        let linked = std::fs::hard_link(&tmp, &run_file);
+        let _ = std::fs::remove_file(&tmp);
+        match linked {
+            Ok(()) => atomic::sync_parent_dir(&run_file),
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
+            Err(e) => return Err(Error::io(&run_file, e)),
+        }
+    }
+    let text = std::fs::read_to_string(&run_file).with_path(&run_file)?;
+    let old: RunIdentity = serde_json::from_str(&text)
+        .map_err(|e| Error::input(&run_file, format!("unreadable run description: {e}")))?;
+    if old != *identity {
+        return Err(Error::input(
+            dir,
+            format!(
+                "this shard's run differs from the one the work directory was made for ({}): give every shard the same inputs and options, or another --work-dir",
+                old.differences(identity).join("; ")
+            ),
+        ));
     }
     Ok(Lease {
         dir: dir.to_path_buf(),
@@ -328,13 +409,13 @@ pub fn remove_owned(dir: &Path) -> Result<Vec<PathBuf>> {
         return Ok(Vec::new());
     }
     atomic::remove_stale_temps(dir, true);
-    for name in [WORK_STORE, LEAVES, TILES, PATCHES] {
+    for name in [WORK_STORE, LEAVES, TILES, CLAIMS, PATCHES] {
         let p = dir.join(name);
         if p.is_dir() {
             std::fs::remove_dir_all(&p).with_path(&p)?;
         }
     }
-    for name in [RUN_FILE, SOLVE_FILE, RESAMPLED, MARKER] {
+    for name in [RUN_FILE, SOLVE_FILE, MERGE_FILE, RESAMPLED, MARKER] {
         let p = dir.join(name);
         if p.exists() {
             std::fs::remove_file(&p).with_path(&p)?;
@@ -367,6 +448,9 @@ pub struct WorkDir {
     pub leaves: PathBuf,
     /// Tile checkpoints.
     pub tiles: PathBuf,
+    /// The claims of a split run's shards on leaves and tiles
+    /// ([`Claims`](crate::pipeline::shard::Claims)).
+    pub claims: PathBuf,
 }
 
 /// Make `params.work_dir` ready for the solve of `plan` on `store`: record the plan; when the
@@ -388,12 +472,19 @@ pub fn prepare(store: &Store, plan: &Plan, params: &ReconParams) -> Result<WorkD
         .ok()
         .and_then(|t| serde_json::from_str(&t).ok());
     if old.as_ref() != Some(&info) {
+        if old.is_some() && params.shard.is_split() {
+            // Another shard's checkpoints: never removed.
+            return Err(Error::input(
+                &info_path,
+                "another shard of this work directory planned other grids or read another store: give every shard the same store, options and --mem (the grids follow the memory budget)",
+            ));
+        }
         if old.is_some() {
             log::info!(
                 "{}: the checkpoints there were made with another plan (--mem and --tile change it): solving the leaves again",
                 dir.display()
             );
-            for name in [LEAVES, TILES] {
+            for name in [LEAVES, TILES, CLAIMS] {
                 let p = dir.join(name);
                 if p.is_dir() {
                     std::fs::remove_dir_all(&p).with_path(&p)?;
@@ -408,7 +499,15 @@ pub fn prepare(store: &Store, plan: &Plan, params: &ReconParams) -> Result<WorkD
     std::fs::create_dir_all(&leaves).with_path(&leaves)?;
     let tiles = dir.join(TILES);
     std::fs::create_dir_all(&tiles).with_path(&tiles)?;
-    Ok(WorkDir { leaves, tiles })
+    let claims = dir.join(CLAIMS);
+    if params.shard.is_split() {
+        std::fs::create_dir_all(&claims).with_path(&claims)?;
+    }
+    Ok(WorkDir {
+        leaves,
+        tiles,
+        claims,
+    })
 }
 
 #[cfg(test)]

@@ -57,14 +57,77 @@ pub fn read_leaf(dir: &Path, key: CellKey, m: usize) -> Result<LeafDetail> {
     let n = detail_len(m);
     let raw = zstd::bulk::decompress(&z, LEAF_HEADER + n * 2 + 16)
         .map_err(|e| Error::input(&path, format!("corrupt leaf checkpoint: {e}")))?;
-    if raw.len() >= 8 && raw[..6] == LEAF_MAGIC[..6] && raw[..8] != LEAF_MAGIC[..] {
+    let h = leaf_header(&path, &raw, key)?;
+    let want = LEAF_HEADER + if h.has_detail { n * 2 } else { 0 };
+    if raw.len() != want {
         return Err(Error::input(
             &path,
+            format!(
+                "corrupt leaf checkpoint: {} bytes, expected {want}",
+                raw.len()
+            ),
+        ));
+    }
+    let detail = h.has_detail.then(|| Detail {
+        values: raw[LEAF_HEADER..]
+            .chunks_exact(2)
+            .map(|b| i16::from_le_bytes([b[0], b[1]]))
+            .collect(),
+        shift: h.shift,
+    });
+    Ok(LeafDetail {
+        detail,
+        iso_sum: h.iso_sum,
+        iso_count: h.iso_count,
+        iterations: 0,
+    })
+}
+
+/// What a leaf checkpoint's header says.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LeafSummary {
+    /// Sum of the leaf's field at its samples.
+    pub iso_sum: f64,
+    /// Samples summed.
+    pub iso_count: u64,
+    /// Whether the leaf was refined (its checkpoint holds a detail).
+    pub has_detail: bool,
+    /// The detail's exponent.
+    shift: u32,
+}
+
+/// Leaf `key`'s checkpoint in `dir` read as far as its header: its iso sum and count and
+/// whether it holds a detail (the detail itself is checked where the tiles read it).
+pub fn read_leaf_summary(dir: &Path, key: CellKey) -> Result<LeafSummary> {
+    use std::io::Read;
+    let path = leaf_path(dir, key);
+    let f = std::fs::File::open(&path).with_path(&path)?;
+    let mut raw = Vec::with_capacity(LEAF_HEADER);
+    zstd::stream::read::Decoder::new(f)
+        .with_path(&path)?
+        .take(LEAF_HEADER as u64)
+        .read_to_end(&mut raw)
+        .map_err(|e| Error::input(&path, format!("corrupt leaf checkpoint: {e}")))?;
+    leaf_header(&path, &raw, key)
+}
+
+/// The header of leaf `key`'s checkpoint `path`, from its decompressed bytes `raw` (the
+/// header at least).
+fn leaf_header(path: &Path, raw: &[u8], key: CellKey) -> Result<LeafSummary> {
+    if raw.len() >= 8 && raw[..6] == LEAF_MAGIC[..6] && raw[..8] != LEAF_MAGIC[..] {
+        return Err(Error::input(
+            path,
             format!(
                 "leaf checkpoint written by another version of scanflow ({}; this one reads {}): run again without --resume in a new work directory",
                 String::from_utf8_lossy(&raw[..8]),
                 String::from_utf8_lossy(LEAF_MAGIC)
             ),
+        ));
+    }
+    if raw.len() < LEAF_HEADER || raw[..8] != LEAF_MAGIC[..] {
+        return Err(Error::input(
+            path,
+            "corrupt leaf checkpoint: wrong size or magic",
         ));
     }
     let u32_at = |o: usize| u32::from_le_bytes([raw[o], raw[o + 1], raw[o + 2], raw[o + 3]]);
@@ -73,38 +136,23 @@ pub fn read_leaf(dir: &Path, key: CellKey, m: usize) -> Result<LeafDetail> {
         a.copy_from_slice(&raw[o..o + 8]);
         u64::from_le_bytes(a)
     };
-    if raw.len() < LEAF_HEADER || raw[..8] != LEAF_MAGIC[..] {
-        return Err(Error::input(
-            &path,
-            "corrupt leaf checkpoint: wrong size or magic",
-        ));
-    }
     let (shift, has) = (u32_at(32), u32_at(36));
-    let want = LEAF_HEADER + if has == 1 { n * 2 } else { 0 };
-    if has > 1 || raw.len() != want || shift > MAX_SHIFT {
+    if has > 1 || shift > MAX_SHIFT {
         return Err(Error::input(
-            &path,
+            path,
             format!(
-                "corrupt leaf checkpoint: {} bytes with detail flag {has} and exponent {shift}, expected {want} bytes and an exponent of at most {MAX_SHIFT}",
-                raw.len()
+                "corrupt leaf checkpoint: detail flag {has} and exponent {shift}, expected 0 or 1 and an exponent of at most {MAX_SHIFT}"
             ),
         ));
     }
     if u64_at(8) != key.0 {
-        return Err(Error::input(&path, "leaf checkpoint of another cell"));
+        return Err(Error::input(path, "leaf checkpoint of another cell"));
     }
-    let detail = (has == 1).then(|| Detail {
-        values: raw[LEAF_HEADER..]
-            .chunks_exact(2)
-            .map(|b| i16::from_le_bytes([b[0], b[1]]))
-            .collect(),
-        shift,
-    });
-    Ok(LeafDetail {
-        detail,
+    Ok(LeafSummary {
         iso_sum: f64::from_bits(u64_at(16)),
         iso_count: u64_at(24),
-        iterations: 0,
+        has_detail: has == 1,
+        shift,
     })
 }
 
@@ -267,6 +315,13 @@ mod tests {
         };
         write_leaf(dir.path(), plain, &coarse).unwrap();
         assert!(read_leaf(dir.path(), plain, m).unwrap().detail.is_none());
+        // The header alone gives what the leaf pass sums (shards read others' leaves so).
+        let s = read_leaf_summary(dir.path(), key).unwrap();
+        assert_eq!((s.iso_sum, s.iso_count, s.has_detail), (-12.5, 7, true));
+        let s = read_leaf_summary(dir.path(), plain).unwrap();
+        assert_eq!((s.iso_sum, s.iso_count, s.has_detail), (1.0, 2, false));
+        let e = read_leaf_summary(dir.path(), CellKey::new(3, [5, 5, 5]));
+        assert!(e.unwrap_err().to_string().contains(".zst"));
         let e = leaf_detail(dir.path(), plain, m).unwrap_err().to_string();
         assert!(e.contains("without a detail") && e.contains(".zst"), "{e}");
         // Bad files: another grid size, another cell, an older format, garbage.

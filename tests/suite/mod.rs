@@ -16,5 +16,6 @@ mod normals;
 mod ownership;
 mod precision;
 mod recon;
+mod shards;
 mod spectral;
 mod store_verify;

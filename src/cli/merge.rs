@@ -1,0 +1,33 @@
+//! `scanflow merge`: the tiles of a split reconstruction welded into one mesh
+//! (`pipeline::merge`), then the shared work directory removed (only what scanflow made in
+//! it) unless `--keep-work`.
+
+use anyhow::Result;
+
+use scanflow::exec::Ctx;
+use scanflow::pipeline::workdir;
+
+use super::config::MergeConfig;
+use super::{report, signals};
+
+/// Merge and print the summary.
+pub fn run(c: &MergeConfig, ctx: &Ctx) -> Result<()> {
+    signals::set_note(Some(format!(
+        "no output written; the work directory {} is kept: run merge again",
+        c.work_dir.display()
+    )));
+    let st = scanflow::pipeline::merge(&c.work_dir, &c.output, ctx)?;
+    signals::set_note(Some(format!("{} is complete", c.output.display())));
+    report::merge(&st, &c.output);
+    if !c.keep_work {
+        let left = workdir::remove_owned(&c.work_dir)?;
+        if !left.is_empty() {
+            log::warn!(
+                "{}: kept: it holds {} entries scanflow did not make",
+                c.work_dir.display(),
+                left.len()
+            );
+        }
+    }
+    Ok(())
+}
