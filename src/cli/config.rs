@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result, bail};
 
 use scanflow::exec::progress::{Mode, Progress};
-use scanflow::exec::{Ctx, default_mem_bytes, parse_mem};
+use scanflow::exec::{Ctx, default_mem_bytes, human_bytes, parse_mem};
 use scanflow::normals::{NormalParams, NormalsMode};
 use scanflow::pipeline::ReconParams;
 use scanflow::pipeline::ingest::IngestParams;
@@ -411,6 +411,16 @@ impl ReconstructConfig {
                 "--tile {t}: expected a power of two from {} to {}",
                 TILES.start(),
                 TILES.end()
+            );
+        }
+        let screened = point_weight != PointWeight::Fixed(0.0);
+        let least = scanflow::pipeline::reconstruct::least_mem(a.depth, screened);
+        if run.mem_bytes < least {
+            bail!(
+                "--mem {}: a reconstruction at --depth {} needs at least {} (its coarse solve, then the coarse solution beside one leaf solve, at the coarse ratio that needs least); raise --mem or lower --depth",
+                human_bytes(run.mem_bytes),
+                a.depth,
+                human_bytes(least)
             );
         }
         paths::output_file(&a.output, paths::PLY)?;

@@ -14,9 +14,11 @@ use std::sync::{Arc, Condvar, Mutex};
 use crate::error::{Error, Result};
 use crate::exec::human_bytes;
 
-/// The slices of the budget that long-lived consumers size themselves by, as divisors of the
+/// The slices of the budget that long-lived consumers size themselves by, as fractions of the
 /// whole. Slices of one stage may be live at once, so within a stage they add up to at most
 /// the whole; what remains is admitted per task (a solve, a tile, a chunk) through permits.
+/// Reconstruct's coarse scratch is live alone (before the caches), and the plan picks the
+/// coarse ratio so that its solution, the point cache and one leaf solve then fit too.
 ///
 /// | stage | consumer | slice |
 /// | --- | --- | --- |
@@ -25,7 +27,7 @@ use crate::exec::human_bytes;
 /// | ingest | scatter buffers before a flush | 1/8 |
 /// | normals | the cache of decoded neighbour cells | 1/4 |
 /// | normals | the cells of one estimation wave | 1/3 |
-/// | reconstruct | the coarse grid (picks the coarse ratio) | 1/3 |
+/// | reconstruct | the coarse solve's scratch, while it runs (with the leaf pass, picks the coarse ratio) | 2/3 |
 /// | reconstruct | the cache of sorted store cells (at most 128 MiB) | 1/4 |
 /// | reconstruct | the cache of leaf details read back for tiles | 1/6 |
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -50,23 +52,24 @@ pub enum Share {
 }
 
 impl Share {
-    /// The slice as a divisor of the whole budget.
-    pub const fn divisor(self) -> u64 {
+    /// The slice as a fraction of the whole budget: numerator, denominator.
+    pub const fn fraction(self) -> (u64, u64) {
         match self {
-            Share::IngestChunks => 2,
-            Share::CountingGrid => 4,
-            Share::ScatterBuffers => 8,
-            Share::NormalsCellCache => 4,
-            Share::NormalsWave => 3,
-            Share::CoarseGrid => 3,
-            Share::PointCache => 4,
-            Share::DetailCache => 6,
+            Share::IngestChunks => (1, 2),
+            Share::CountingGrid => (1, 4),
+            Share::ScatterBuffers => (1, 8),
+            Share::NormalsCellCache => (1, 4),
+            Share::NormalsWave => (1, 3),
+            Share::CoarseGrid => (2, 3),
+            Share::PointCache => (1, 4),
+            Share::DetailCache => (1, 6),
         }
     }
 
     /// The slice of a budget of `total` bytes.
     pub const fn of(self, total: u64) -> u64 {
-        total / self.divisor()
+        let (num, den) = self.fraction();
+        (total as u128 * num as u128 / den as u128) as u64
     }
 }
 

@@ -25,7 +25,7 @@ use crate::recon::checkpoint::{LeafSummary, leaf_path, read_leaf_summary, write_
 use crate::recon::pou::unit_for;
 use crate::recon::{
     CoarseField, DEFAULT_ERROR, DEFAULT_MIN_POINTS, LeafDetail, LeafRule, LeafSolvers, Moments,
-    Plan, PointWeight, fft_solve, refine_leaf,
+    Plan, PlanBudget, PointWeight, fft_solve, refine_leaf,
     screen::{self, NOISE_KEY_BYTES, NoiseStats, ScreenBuilder},
     solve_coarse,
 };
@@ -253,8 +253,41 @@ fn plan_run(store: &Store, params: &ReconParams, ctx: &Ctx) -> Result<Plan> {
         // screened solve, and the coarse pass sets the weight.
         params.point_weight.alpha(None),
         params.tile_voxels,
-        ctx.budget.share(Share::CoarseGrid),
+        plan_budget(ctx.budget.total()),
     )
+}
+
+/// What a budget of `total` bytes gives the grids ([`Share`]): the coarse solve's scratch its
+/// slice, and the coarse solution with one leaf solve what the point cache leaves.
+fn plan_budget(total: u64) -> PlanBudget {
+    let cache = Share::PointCache.of(total).min(POINT_CACHE_MAX_BYTES);
+    PlanBudget {
+        coarse: Share::CoarseGrid.of(total),
+        leaf: total.saturating_sub(cache),
+    }
+}
+
+/// The smallest `--mem` a reconstruction at `depth` can be planned in (screened or not): at
+/// the best coarse ratio, its coarse solve's scratch, and then its coarse solution beside one
+/// leaf solve and the point cache, within their slices ([`Plan::least_budget`]).
+pub fn least_mem(depth: u32, screened: bool) -> u64 {
+    Plan::least_budget(depth, screened, |need| {
+        // The smallest total whose slices hold `need`: they grow with the total.
+        let fits = |t: u64| {
+            let b = plan_budget(t);
+            b.coarse >= need.coarse && b.leaf >= need.leaf
+        };
+        let (mut lo, mut hi) = (0u64, 1u64 << 50);
+        while hi - lo > 1 {
+            let mid = lo + (hi - lo) / 2;
+            if fits(mid) {
+                hi = mid;
+            } else {
+                lo = mid;
+            }
+        }
+        hi
+    })
 }
 
 /// What the coarse pass leaves: the coarse solution (its permit held while it lives), the
@@ -296,11 +329,20 @@ fn coarse_pass(store: &Store, plan: &Plan, weight: PointWeight, ctx: &Ctx) -> Re
     let ncells = m.cells.len();
     let mut i = 0;
     while i < ncells {
-        let ids: Vec<usize> = (i..(i + wave).min(ncells)).collect();
-        let bytes: u64 = ids
-            .iter()
-            .map(|&j| m.cells[j].count * (BATCH_POINT_BYTES + NOISE_KEY_BYTES))
-            .sum();
+        // At most `wave` cells, within half of what is free (the screening samples grow into
+        // the other half), at least one. Batches are splatted in cell order whatever the
+        // waves.
+        let free = ctx.budget.total().saturating_sub(ctx.budget.used());
+        let (mut ids, mut bytes) = (Vec::with_capacity(wave), 0u64);
+        while i < ncells && ids.len() < wave {
+            let b = m.cells[i].count * (BATCH_POINT_BYTES + NOISE_KEY_BYTES);
+            if !ids.is_empty() && bytes + b > free / 2 {
+                break;
+            }
+            ids.push(i);
+            bytes += b;
+            i += 1;
+        }
         // The coarse grid's permit is held: admitted without waiting (see `tiles::admit_now`).
         let _permit = tiles::admit_now(ctx, bytes);
         // Each cell's noise statistics beside its read (for `auto` and the vertex fit);
@@ -339,7 +381,6 @@ fn coarse_pass(store: &Store, plan: &Plan, weight: PointWeight, ctx: &Ctx) -> Re
             }
             stage.inc(b.len() as u64);
         }
-        i += wave;
     }
     stage.finish(None);
     moments.check_not_flat(&store.dir)?;
@@ -350,6 +391,11 @@ fn coarse_pass(store: &Store, plan: &Plan, weight: PointWeight, ctx: &Ctx) -> Re
     let (field, conv) = ctx.pool.install(|| solve_coarse(plan, v, &screen));
     drop(screen);
     drop(screen_permit);
+    // From here on only the solution is held (the plan counted on it for the leaf pass).
+    drop(permit);
+    let permit = ctx
+        .budget
+        .acquire_now(plan.coarse_field_bytes(), "the coarse solution")?;
     stage.finish(None);
     Ok(CoarsePass {
         field,
@@ -532,4 +578,44 @@ fn leaf_pass(
         solved,
         iterations,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::types::Cube;
+
+    /// At the least budget of a depth a plan's coarse solve and leaf pass fit their slices;
+    /// a little less fits no coarse ratio.
+    #[test]
+    fn the_least_budget_plans_and_less_does_not() {
+        let cube = Cube {
+            origin: [0.0; 3],
+            size: 1.0,
+        };
+        for depth in 7..=12 {
+            for screened in [false, true] {
+                let least = least_mem(depth, screened);
+                let b = plan_budget(least);
+                let alpha = if screened { 4.0 } else { 0.0 };
+                let p = Plan::new(cube, depth, 1.0, alpha, None, b).unwrap();
+                let need = Plan::needs(depth, p.coarse_ratio, screened);
+                assert!(
+                    need.coarse <= b.coarse && need.leaf <= b.leaf,
+                    "depth {depth}"
+                );
+                assert_eq!(p.coarse_field_bytes() + p.leaf_scratch_bytes(), need.leaf);
+                let less = plan_budget(least - (1 << 20));
+                let mut r = 4;
+                while 8 * r < 1 << depth {
+                    let need = Plan::needs(depth, r, screened);
+                    assert!(
+                        need.coarse > less.coarse || need.leaf > less.leaf,
+                        "depth {depth}"
+                    );
+                    r *= 2;
+                }
+            }
+        }
+    }
 }

@@ -74,7 +74,7 @@ pub use blend::{leaves_near, tile_blend};
 pub use coarse::{CoarseField, Moments};
 pub use global::{GlobalField, global_field};
 pub use leaf::{LeafDetail, LeafPoints, LeafSolvers, coarse_error, coarse_only, solve_leaf};
-pub use plan::{DEFAULT_ERROR, DEFAULT_MIN_POINTS, DEPTHS, Plan};
+pub use plan::{DEFAULT_ERROR, DEFAULT_MIN_POINTS, DEPTHS, Plan, PlanBudget};
 pub use screen::PointWeight;
 
 use crate::types::CellKey;

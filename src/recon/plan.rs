@@ -58,6 +58,15 @@ pub fn smooth_size(n: u64) -> u64 {
     }
 }
 
+/// What the grids of a plan hold at the two peaks of a run, or what a budget allows there.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct PlanBudget {
+    /// The coarse solve's scratch, while it runs.
+    pub coarse: u64,
+    /// The coarse solution and one leaf solve, held together through the leaf pass.
+    pub leaf: u64,
+}
+
 /// The grids of one run. Serialised in the work directory's run description under the short
 /// names of earlier versions, so that work directories stay resumable.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -109,16 +118,16 @@ pub struct Plan {
 }
 
 impl Plan {
-    /// Choose grids for `depth` on `cube` within `coarse_budget_bytes` (the budget's
-    /// [`crate::exec::budget::Share::CoarseGrid`]): the smallest coarse ratio `r >= 4` whose
-    /// coarse solve fits it.
+    /// Choose grids for `depth` on `cube` within `budget`: the smallest coarse ratio
+    /// `r >= 4` whose coarse solve's scratch, and then whose coarse solution beside one leaf
+    /// solve, fit it ([`Plan::needs`]).
     pub fn new(
         cube: Cube,
         depth: u32,
         sigma_vox: f64,
         point_weight: f64,
         tile: Option<u64>,
-        coarse_budget_bytes: u64,
+        budget: PlanBudget,
     ) -> Result<Plan> {
         if !DEPTHS.contains(&depth) {
             return Err(Error::Usage(format!(
@@ -128,17 +137,11 @@ impl Plan {
             )));
         }
         let n = 1u64 << depth;
-        let per_node = if point_weight > 0.0 {
-            SCREENED_BYTES_PER_NODE
-        } else {
-            COARSE_BYTES_PER_NODE
-        };
+        let screened = point_weight > 0.0;
         let mut r = MIN_COARSE_RATIO;
-        loop {
-            let e = LEAF_COARSE_VOXELS * r;
-            let nc = smooth_size(n / r + COARSE_PAD_VOXELS);
-            let coarse_bytes = nc * nc * nc * per_node;
-            if e >= n || coarse_bytes <= coarse_budget_bytes {
+        while LEAF_COARSE_VOXELS * r < n {
+            let need = Plan::needs(depth, r, screened);
+            if need.coarse <= budget.coarse && need.leaf <= budget.leaf {
                 break;
             }
             r *= 2;
@@ -165,6 +168,40 @@ impl Plan {
             point_weight,
             noise_voxels: None,
         })
+    }
+
+    /// What coarse ratio `r` holds at depth `depth`: the coarse solve's scratch, then the
+    /// coarse solution (f32 a node) with one leaf's fine solve (its `(2E)³` grid, `E = 8r`).
+    pub fn needs(depth: u32, r: u64, screened: bool) -> PlanBudget {
+        let n = 1u64 << depth;
+        let e = (LEAF_COARSE_VOXELS * r).min(n);
+        let r = (e / LEAF_COARSE_VOXELS).max(1);
+        let nc = smooth_size(n / r + COARSE_PAD_VOXELS);
+        let grid = |n: u64| LocalGrid {
+            n: n as usize,
+            h: 1.0,
+            origin: [0.0; 3],
+            unit: 1.0,
+        };
+        PlanBudget {
+            coarse: grid(nc).solve_bytes(screened),
+            leaf: nc * nc * nc * 4 + grid(2 * e).solve_bytes(screened),
+        }
+    }
+
+    /// The least of the coarse ratios' needs at `depth`, each scaled by `to_total` into the
+    /// whole budget it takes: the smallest `--mem` a run at this depth can be planned in.
+    pub fn least_budget(depth: u32, screened: bool, to_total: impl Fn(PlanBudget) -> u64) -> u64 {
+        let n = 1u64 << depth;
+        let mut r = MIN_COARSE_RATIO;
+        let mut least = u64::MAX;
+        loop {
+            least = least.min(to_total(Plan::needs(depth, r, screened)));
+            if LEAF_COARSE_VOXELS * r >= n {
+                return least;
+            }
+            r *= 2;
+        }
     }
 
     /// Coarse nodes per axis (periodic FFT size).
@@ -225,6 +262,11 @@ impl Plan {
             unit: self.cube.size,
         }
         .solve_bytes(self.point_weight > 0.0)
+    }
+
+    /// Bytes of the coarse solution (f32 a node).
+    pub fn coarse_field_bytes(&self) -> u64 {
+        self.coarse_nodes.pow(3) * 4
     }
 
     /// Scratch bytes of the coarse global solve.

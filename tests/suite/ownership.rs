@@ -237,23 +237,23 @@ fn failed_runs_remove_their_work_dir_and_name_the_input() {
 }
 
 #[test]
-fn failed_run_that_keeps_its_work_dir_says_where_and_resumes() {
+fn a_budget_below_what_the_depth_needs_is_refused_before_any_work() {
     let d = tempfile::tempdir().unwrap();
     let input = d.path().join("b.ply");
     synth(&input, 20_000, 1);
     let out = d.path().join("m.ply");
     let work = d.path().join("m.ply.work");
-    // Ingest fits in 16M; the leaf solves of depth 9 do not: the store is worth keeping.
+    // Ingest would fit in 16M; the grids of depth 9 cannot: refused before the ingest, naming
+    // the least budget, with nothing made.
     let e = usage(&recon_args(&input, &out, &["--depth", "9", "--mem", "16M"]));
-    assert!(e.contains("raise --mem"), "{e}");
     assert!(
-        e.contains(&format!("the work directory {} is kept", work.display()))
-            && e.contains("--resume"),
+        e.contains("--mem 16.00 MiB") && e.contains("--depth 9 needs at least 77.96 MiB"),
         "{e}"
     );
-    assert!(work.join("store").is_dir() && !out.exists());
-    ok(&recon_args(&input, &out, &["--depth", "9", "--resume"]));
-    assert!(out.is_file() && !work.exists());
+    assert!(!work.exists() && !out.exists());
+    // At that least budget the run completes.
+    let o = ok(&recon_args(&input, &out, &["--depth", "9", "--mem", "78M"]));
+    assert!(out.is_file() && !work.exists(), "{o}");
 }
 
 #[test]
