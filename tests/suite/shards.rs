@@ -76,6 +76,12 @@ fn finish(c: Child) -> String {
     String::from_utf8_lossy(&o.stdout).into_owned()
 }
 
+/// The arguments of merging the work directory `work` into `out`.
+fn merge<'a>(work: &'a Path, out: &'a Path) -> [&'a str; 6] {
+    let (w, o) = (work.to_str().unwrap(), out.to_str().unwrap());
+    ["merge", w, "-o", o, "--progress", "none"]
+}
+
 /// `n` shards run together, then merged; returns the merged bytes.
 fn sharded(store: &Path, dir: &Path, n: u32, opts: &[&str]) -> Vec<u8> {
     let out = dir.join(format!("sharded-{n}.ply"));
@@ -88,14 +94,7 @@ fn sharded(store: &Path, dir: &Path, n: u32, opts: &[&str]) -> Vec<u8> {
         assert!(line.contains("scanflow merge"), "{line}");
     }
     assert!(!out.exists(), "a shard wrote the mesh");
-    let line = ok(&[
-        "merge",
-        work.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-        "--progress",
-        "none",
-    ]);
+    let line = ok(&merge(&work, &out));
     assert!(line.contains("merged"), "{line}");
     assert!(!work.exists(), "merge left its work directory");
     std::fs::read(&out).unwrap()
@@ -212,7 +211,7 @@ fn a_killed_shard_is_replaced_and_rerun_without_repeating_or_missing_work() {
             "{again}"
         );
         assert_eq!(items(&work, "leaves"), leaves);
-        ok(&["merge", work.to_str().unwrap(), "-o", out.to_str().unwrap()]);
+        ok(&merge(&work, &out));
         assert!(
             std::fs::read(&out).unwrap() == want,
             "after kill {kill_after}"
@@ -259,12 +258,7 @@ fn shards_refuse_mixed_runs_bad_numbers_and_point_files_and_merge_waits_for_them
     // A merge before any shard, or of a directory that is no work directory.
     let plain = d.path().join("plain");
     std::fs::create_dir(&plain).unwrap();
-    let e = fails(&[
-        "merge",
-        plain.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-    ]);
+    let e = fails(&merge(&plain, &out));
     assert!(e.contains("not a scanflow work directory"), "{e}");
     // Shards of two different runs in one work directory: the second is refused.
     finish(spawn_shard(&store, &out, &work, 0, 2, &["--depth", "6"]));
@@ -277,12 +271,12 @@ fn shards_refuse_mixed_runs_bad_numbers_and_point_files_and_merge_waits_for_them
     // A tile missing (its shard not finished): merge names it and writes nothing.
     let tiles = items(&work, "tiles");
     std::fs::remove_file(work.join("tiles").join(&tiles[0])).unwrap();
-    let e = fails(&["merge", w, "-o", out.to_str().unwrap()]);
+    let e = fails(&merge(&work, &out));
     assert!(e.contains("1 of ") && e.contains("have no mesh yet"), "{e}");
     assert!(!out.exists() && work.exists());
     // The shard run again fills the gap; the merge then succeeds.
     finish(spawn_shard(&store, &out, &work, 1, 2, &["--depth", "6"]));
-    ok(&["merge", w, "-o", out.to_str().unwrap()]);
+    ok(&merge(&work, &out));
     assert!(out.exists() && !work.exists());
 }
 
