@@ -26,7 +26,7 @@ pub fn run(c: &ReconstructConfig, ctx: &Ctx) -> Result<()> {
     let st = reconstruct(ctx, &c.points, &c.output, &c.params, c.keep_work)?;
     let secs = t0.elapsed().as_secs_f64();
     if c.params.shard.is_split() {
-        let work = workdir::resolve_shared(&c.params.work_dir, &c.output)?;
+        let work = workdir::resolve(&c.params.work_dir, &c.output)?;
         report::shard(&st, c.params.shard, &work, &c.output, secs);
         return Ok(());
     }
@@ -117,11 +117,7 @@ impl WorkRun<'_> {
             }
         };
         let (mode, normal_params) = normals.map(|n| (n.mode, n.params)).unwrap_or_default();
-        let work = if self.shared {
-            workdir::resolve_shared(self.work_dir, output)?
-        } else {
-            workdir::resolve(self.work_dir, output)?
-        };
+        let work = workdir::resolve(self.work_dir, output)?;
         check_paths(&source, output, &work)?;
         let identity = identity(&source, mode, &normal_params)?;
         if self.shared {

@@ -363,6 +363,30 @@ pub fn write(path: &Path, bytes: &[u8], durability: Durability) -> Result<()> {
     f.commit_with(durability)
 }
 
+/// Write `bytes` to `path` unless `path` exists, as one step that never replaces it: written
+/// under the temporary name, synced, then hard-linked to `path` (`link(2)` fails when the
+/// name exists, atomically on local file systems and on NFS), and the temporary name
+/// removed. Returns whether this call wrote it; `false`: someone else's file is there, left
+/// as it is. For a description several processes publish, the first one winning.
+pub fn write_once(path: &Path, bytes: &[u8]) -> Result<bool> {
+    use std::io::Write;
+    let tmp = temp_name(path);
+    let written = create_temp_file(&tmp).and_then(|mut f| {
+        f.write_all(bytes).with_path(&tmp)?;
+        f.sync_all().with_path(&tmp)
+    });
+    let linked = written.and_then(|()| match std::fs::hard_link(&tmp, path) {
+        Ok(()) => Ok(true),
+        Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => Ok(false),
+        Err(e) => Err(Error::io(path, e)),
+    });
+    remove_temp(&tmp);
+    if let Ok(true) = linked {
+        sync_parent_dir(path);
+    }
+    linked
+}
+
 /// A directory built under the temporary sibling name `.NAME.tmp-<pid>` and renamed to its
 /// final name when complete (a store); removed when dropped without [`TempDir::commit`].
 #[derive(Debug)]
@@ -420,6 +444,18 @@ impl Drop for TempDir {
 mod tests {
     use super::*;
     use std::io::Write;
+
+    #[test]
+    fn write_once_keeps_the_first_file() {
+        let d = tempfile::tempdir().unwrap();
+        let p = d.path().join("run.json");
+        assert!(write_once(&p, b"first").unwrap());
+        assert!(!write_once(&p, b"second").unwrap());
+        assert_eq!(std::fs::read(&p).unwrap(), b"first");
+        let names: Vec<_> = std::fs::read_dir(d.path()).unwrap().flatten().collect();
+        assert_eq!(names.len(), 1, "a temporary file was left");
+        assert!(write_once(&d.path().join("none").join("x"), b"x").is_err());
+    }
 
     #[test]
     fn appears_only_on_commit_and_drop_cleans_up() {

@@ -13,15 +13,13 @@ use serde::Serialize;
 
 use super::merge;
 use super::points::{PointSource, SORTED_POINT_BYTES};
-use super::shard::Claims;
-use super::shard::Shard;
+use super::shard::{Claims, Shard};
 use super::tiles::{self, TileJob};
 use super::workdir::{self, WorkDir};
 use crate::error::{Error, Result};
 use crate::exec::Ctx;
 use crate::exec::budget::{Permit, Share};
 use crate::recon::checkpoint::{LeafSummary, leaf_path, read_leaf_summary, write_leaf};
-
 use crate::recon::pou::unit_for;
 use crate::recon::{
     CoarseField, DEFAULT_ERROR, DEFAULT_MIN_POINTS, LeafDetail, LeafRule, LeafSolvers, Moments,
@@ -110,7 +108,8 @@ pub struct ReconStats {
     pub leaves: usize,
     /// Leaves refined by a fine solve (the others were within `--error` of the coarse solve).
     pub leaves_refined: usize,
-    /// Leaves reused from the work directory.
+    /// Leaves found checkpointed in the work directory (by a resumed run's predecessor, or
+    /// by another shard).
     pub leaves_reused: usize,
     /// Tiles extracted or read back (tiles with no surface are skipped); in a split run, the
     /// tiles this shard extracted.
@@ -449,15 +448,12 @@ fn leaf_pass(
     // Fixed point for the blend (`extract::field`): the coarse values within 2^21 units;
     // leaf details are stored in it.
     let unit = unit_for(coarse.max_abs());
-    let split = params.shard.is_split();
-    let reuse = params.resume || split;
+    let reuse = params.resume || params.shard.is_split();
     let claims = Claims::new(&dirs.claims);
     let order = params.shard.order(leaves.len());
     let mut outcomes: Vec<Option<(f64, u64, bool)>> = vec![None; leaves.len()];
-    // A split run claims its leaves, then does every one still missing (see `shard`).
-    let passes: &[bool] = if split { &[true, false] } else { &[false] };
     let wave = 2 * ctx.threads();
-    for &claiming in passes {
+    for &claiming in params.shard.passes() {
         let mut next = 0;
         loop {
             let mut wave_idx = Vec::with_capacity(wave);

@@ -92,6 +92,20 @@ impl Shard {
                 .parse::<u32>()
                 .map_err(|_| bad(format!("{name} is {v:?}, not a whole number")))
         };
+        // SLURM numbers the tasks from SLURM_ARRAY_TASK_MIN (`--array=1-3`): the shard is the
+        // task's offset from it.
+        let slurm_index = |id: &str| -> Result<u32> {
+            let min = env("SLURM_ARRAY_TASK_MIN").unwrap_or_else(|| "0".into());
+            let (id, min) = (
+                num("SLURM_ARRAY_TASK_ID", id)?,
+                num("SLURM_ARRAY_TASK_MIN", &min)?,
+            );
+            id.checked_sub(min).ok_or_else(|| {
+                bad(format!(
+                    "SLURM_ARRAY_TASK_ID {id} is below SLURM_ARRAY_TASK_MIN {min}"
+                ))
+            })
+        };
         let (index, count) = match text.split_once('/') {
             None if text == "auto" => {
                 let id = env("SLURM_ARRAY_TASK_ID").ok_or_else(|| {
@@ -99,18 +113,7 @@ impl Shard {
                 })?;
                 let count = env("SLURM_ARRAY_TASK_COUNT")
                     .ok_or_else(|| bad("SLURM_ARRAY_TASK_ID is set but SLURM_ARRAY_TASK_COUNT is not (SLURM 18.08 or later sets both)".into()))?;
-                let min = env("SLURM_ARRAY_TASK_MIN").unwrap_or_else(|| "0".into());
-                let (id, min) = (
-                    num("SLURM_ARRAY_TASK_ID", &id)?,
-                    num("SLURM_ARRAY_TASK_MIN", &min)?,
-                );
-                let count = num("SLURM_ARRAY_TASK_COUNT", &count)?;
-                if id < min {
-                    return Err(bad(format!(
-                        "SLURM_ARRAY_TASK_ID {id} is below SLURM_ARRAY_TASK_MIN {min}"
-                    )));
-                }
-                (id - min, count)
+                (slurm_index(&id)?, num("SLURM_ARRAY_TASK_COUNT", &count)?)
             }
             None => {
                 return Err(bad(
@@ -133,11 +136,11 @@ impl Shard {
                             vars.join(", ")
                         ))
                     })?;
-                let mut id = num(name, &v)?;
-                if name == "SLURM_ARRAY_TASK_ID" {
-                    let min = env("SLURM_ARRAY_TASK_MIN").unwrap_or_else(|| "0".into());
-                    id = id.saturating_sub(num("SLURM_ARRAY_TASK_MIN", &min)?);
-                }
+                let id = if name == "SLURM_ARRAY_TASK_ID" {
+                    slurm_index(&v)?
+                } else {
+                    num(name, &v)?
+                };
                 (id, count)
             }
             Some((i, n)) => (num("the index", i)?, num("the count", n)?),
@@ -163,6 +166,13 @@ impl Shard {
     fn slice_of(&self, index: u32, n: usize) -> Range<usize> {
         let at = |i: u32| (n as u128 * i as u128 / self.count as u128) as usize;
         at(index)..at(index + 1)
+    }
+
+    /// The passes over the work items, each saying whether it claims them: a split run
+    /// claims in its first pass and then does every item still missing (see the [module
+    /// docs](self)); the whole run in one process makes one pass without claims.
+    pub fn passes(&self) -> &'static [bool] {
+        if self.split { &[true, false] } else { &[false] }
     }
 
     /// The order this shard visits `n` items in: its own slice forwards, then each following

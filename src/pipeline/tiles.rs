@@ -145,15 +145,10 @@ pub fn run(
     let mut tiles_done = 0usize;
     let order = shard.order(tiles.len());
     let claims = Claims::new(job.claims_dir);
-    // A split run claims its tiles, then does every one still missing (see `shard`); a
-    // tile checkpointed by another shard is left for `merge`.
-    let passes: &[bool] = if shard.is_split() {
-        &[true, false]
-    } else {
-        &[false]
-    };
+    // A split run claims its tiles, then does every one still missing; one another shard
+    // checkpointed is left for `merge` (`next_wave`).
     let mut visited = vec![false; tiles.len()];
-    for &claiming in passes {
+    for &claiming in shard.passes() {
         let mut next = 0usize;
         loop {
             let free = ctx.budget.total().saturating_sub(ctx.budget.used());
@@ -161,7 +156,7 @@ pub fn run(
                 tiles,
                 order: &order,
                 visited: &mut visited,
-                claims: (claiming).then_some(&claims),
+                claims: claiming.then_some(&claims),
             };
             let (wave_tiles, wave_bytes) = next_wave(job, pick, &mut next, &sizes, free)?;
             if wave_tiles.is_empty() {

@@ -103,19 +103,6 @@ pub fn resolve(requested: &Path, output: &Path) -> Result<PathBuf> {
     }
 }
 
-/// [`resolve`] for the shards of a split run, which arrive together: an existing empty
-/// directory is taken too, since it is what another shard's [`join`] shows between making the
-/// directory and marking it (or one the job script made for the run).
-pub fn resolve_shared(requested: &Path, output: &Path) -> Result<PathBuf> {
-    let empty = std::fs::read_dir(requested)
-        .map(|mut d| d.next().is_none())
-        .unwrap_or(false);
-    if empty {
-        return Ok(requested.to_path_buf());
-    }
-    resolve(requested, output)
-}
-
 /// Whether `dir` is a work directory scanflow made.
 pub fn is_work_dir(dir: &Path) -> bool {
     dir.join(MARKER).is_file()
@@ -324,43 +311,35 @@ pub fn claim(dir: &Path, identity: &RunIdentity, resume: bool) -> Result<Lease> 
 /// description against its own. Nothing in it is removed (another task may be writing
 /// there).
 ///
-/// The description is published with `link(2)`, which fails when the name exists, so that two
-/// tasks arriving together never both write it and a task never reads half of it; both
-/// primitives, `mkdir(2)` and `link(2)`, are atomic on NFS.
+/// The directory appears by `rename(2)`, already marked, and the description by `link(2)`
+/// ([`atomic::write_once`]), which fails when the name exists, so that two tasks arriving
+/// together never both write it and a task never reads half of it; both primitives are
+/// atomic on NFS.
 pub fn join(dir: &Path, identity: &RunIdentity) -> Result<Lease> {
-    match std::fs::create_dir(dir) {
-        Ok(()) => {}
-        Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists && dir.is_dir() => {}
-        Err(e) => {
+    if !is_work_dir(dir) {
+        // Made with its marker under a temporary name and renamed into place: the directory
+        // never appears unmarked, so shards arriving together all resolve `--work-dir` to it
+        // ([`resolve`]). A rename onto the directory another shard made first fails (it is
+        // not empty), and that one is joined.
+        let made = atomic::TempDir::create(dir).and_then(|t| {
+            atomic::write(&t.path().join(MARKER), MARKER_TEXT, Durability::Synced)?;
+            t.commit(dir)
+        });
+        if let Err(e) = made
+            && !is_work_dir(dir)
+        {
             return Err(Error::input(
                 dir,
                 format!("cannot create the work directory: {e}"),
             ));
         }
     }
-    // Created in place, not renamed into it: between the directory and its marker, the other
-    // shards must see it empty ([`resolve_shared`]), never holding a temporary file.
-    match std::fs::File::create_new(dir.join(MARKER)) {
-        Ok(mut f) => {
-            use std::io::Write;
-            f.write_all(MARKER_TEXT).with_path(dir.join(MARKER))?;
-        }
-        Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
-        Err(e) => return Err(Error::io(dir.join(MARKER), e)),
-    }
     let run_file = dir.join(RUN_FILE);
     if !run_file.exists() {
         let text = serde_json::to_string_pretty(identity)
             .map_err(|e| Error::Internal(format!("{RUN_FILE}: {e}")))?;
-        let tmp = atomic::temp_name(&run_file);
-        std::fs::write(&tmp, text.as_bytes()).with_path(&tmp)?;
-        let linked = std::fs::hard_link(&tmp, &run_file);
-        let _ = std::fs::remove_file(&tmp);
-        match linked {
-            Ok(()) => atomic::sync_parent_dir(&run_file),
-            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
-            Err(e) => return Err(Error::io(&run_file, e)),
-        }
+        // The first shard's description stays; the others compare theirs with it below.
+        atomic::write_once(&run_file, text.as_bytes())?;
     }
     let text = std::fs::read_to_string(&run_file).with_path(&run_file)?;
     let old: RunIdentity = serde_json::from_str(&text)

@@ -278,6 +278,24 @@ fn shards_refuse_mixed_runs_bad_numbers_and_point_files_and_merge_waits_for_them
     finish(spawn_shard(&store, &out, &work, 1, 2, &["--depth", "6"]));
     ok(&merge(&work, &out));
     assert!(out.exists() && !work.exists());
+    // A directory of the user's, even empty, is never the work directory: the shards share
+    // a subdirectory inside it, which merge removes, and the user's stays.
+    let mine = d.path().join("mine");
+    std::fs::create_dir(&mine).unwrap();
+    let out2 = d.path().join("m2.ply");
+    let shards: Vec<Child> = (0..2)
+        .map(|i| spawn_shard(&store, &out2, &mine, i, 2, &["--depth", "6"]))
+        .collect();
+    let inside = mine.join("m2.ply.work");
+    for c in shards {
+        let line = finish(c);
+        assert!(
+            line.contains(&format!("merge {}", inside.display())),
+            "{line}"
+        );
+    }
+    ok(&merge(&inside, &out2));
+    assert!(out2.exists() && mine.is_dir() && !inside.exists());
 }
 
 /// A real cluster: SLURM on localhost runs ingest, an array of 3 shards and the merge, then
