@@ -95,6 +95,18 @@ pub struct NormalOpts {
     pub viewpoint: Vec<String>,
 }
 
+/// How a mesh is written, besides the format its extension names.
+#[derive(Args, Debug)]
+pub struct MeshOutOpts {
+    /// Write PLY as text instead of binary.
+    #[arg(long)]
+    pub ascii: bool,
+    /// Give each vertex a unit normal, the area-weighted mean of its triangles' (PLY nx ny
+    /// nz, OBJ vn; PoissonRecon's --normals output). STL always has each triangle's.
+    #[arg(long)]
+    pub out_normals: bool,
+}
+
 /// `--normals`.
 #[derive(ValueEnum, Debug, Clone, Copy, PartialEq, Eq)]
 pub enum NormalsChoice {
@@ -209,8 +221,8 @@ pub enum Cmd {
 #[derive(Args, Debug)]
 pub struct HexmeshArgs {
     /// Tetrahedral mesh (MEDIT .mesh, gmsh .msh 4.1 or 2.2, VTK legacy .vtk), or a closed
-    /// triangle surface (PLY, OBJ) whose inside is tetrahedralised first (isosurface stuffing
-    /// of its generalised winding number).
+    /// triangle surface (PLY, OBJ, STL) whose inside is tetrahedralised first (isosurface
+    /// stuffing of its generalised winding number).
     pub input: PathBuf,
     /// Output hexahedral mesh: .vtk, .mesh or .msh.
     #[arg(short, long)]
@@ -225,7 +237,7 @@ pub struct HexmeshArgs {
     /// diagonal).
     #[arg(long, allow_negative_numbers = true)]
     pub scale: Option<f64>,
-    /// Edge of the tetrahedra stuffed into a surface input (PLY, OBJ), in input units
+    /// Edge of the tetrahedra stuffed into a surface input (PLY, OBJ, STL), in input units
     /// (default: half the hexahedron edge).
     #[arg(long, allow_negative_numbers = true)]
     pub tet_size: Option<f64>,
@@ -516,9 +528,22 @@ pub struct IngestArgs {
 pub struct ReconstructArgs {
     /// Point files, or one store directory made by `ingest`.
     pub inputs: Vec<PathBuf>,
-    /// Output mesh (binary PLY).
+    /// Output mesh, in the format of its extension: .ply (binary; --ascii for text), .obj or
+    /// .stl (binary).
     #[arg(short, long)]
     pub output: PathBuf,
+    /// How the mesh is written.
+    #[command(flatten)]
+    pub mesh: MeshOutOpts,
+    /// Give each vertex its sampling density (input points per square unit near it), written
+    /// as the PLY's `quality` property (MeshLab's vertex quality; a scalar field in
+    /// CloudCompare), to trim by after the fact as with PoissonRecon's --density.
+    #[arg(long)]
+    pub density: bool,
+    /// Drop the triangles whose corners' mean sampling density (input points per square
+    /// unit, as --density writes it) is below D: trimming by a threshold.
+    #[arg(long, value_name = "D", allow_negative_numbers = true)]
+    pub trim_density: Option<f64>,
     /// Scanalyze .conf listing scans and their transforms.
     #[arg(long)]
     pub conf: Option<PathBuf>,
@@ -599,9 +624,13 @@ pub struct ReconstructArgs {
 pub struct MergeArgs {
     /// The work directory the shards shared (their --work-dir).
     pub work_dir: PathBuf,
-    /// Output mesh (binary PLY).
+    /// Output mesh, in the format of its extension: .ply (binary; --ascii for text), .obj or
+    /// .stl (binary).
     #[arg(short, long)]
     pub output: PathBuf,
+    /// How the mesh is written.
+    #[command(flatten)]
+    pub mesh: MeshOutOpts,
     /// Keep the work directory after success (default: removed, as a run in one process
     /// removes its own).
     #[arg(long)]
@@ -614,8 +643,8 @@ pub struct MergeArgs {
 /// `scanflow check`.
 #[derive(Args, Debug)]
 pub struct CheckArgs {
-    /// The mesh (a PLY with faces), or a point file (a PLY without faces, LAS/LAZ, XYZ/PTS):
-    /// then every point's distance to the truth or reference is measured.
+    /// The mesh (a PLY with faces, OBJ or STL), or a point file (a PLY without faces,
+    /// LAS/LAZ, XYZ/PTS): then every point's distance to the truth or reference is measured.
     pub input: PathBuf,
     /// Exact surface written by `synth` (.truth.json).
     #[arg(long)]

@@ -8,6 +8,7 @@ use anyhow::{Context, Result, bail};
 
 use scanflow::exec::progress::{Mode, Progress};
 use scanflow::exec::{Ctx, default_mem_bytes, human_bytes, parse_mem};
+use scanflow::io::mesh_write::{MeshFormat, MeshTarget};
 use scanflow::normals::{NormalParams, NormalsMode};
 use scanflow::pipeline::ReconParams;
 use scanflow::pipeline::ingest::IngestParams;
@@ -17,7 +18,7 @@ use scanflow::synth::{BUMPY_RELIEF, Shape};
 
 use super::args::{
     CheckArgs, Cli, Cmd, Common, DemoArgs, HexcheckArgs, HexmeshArgs, InfoArgs, IngestArgs,
-    MergeArgs, NormalOpts, ReconstructArgs, SynthArgs,
+    MergeArgs, MeshOutOpts, NormalOpts, ReconstructArgs, SynthArgs,
 };
 pub use super::fit::FitConfig;
 use super::paths;
@@ -366,6 +367,8 @@ pub struct ReconstructConfig {
     pub points: Points,
     /// The mesh to write.
     pub output: PathBuf,
+    /// Its format and normals.
+    pub mesh: MeshTarget,
     /// Depth, smoothing, refinement, tiles, GPU, work directory, resume.
     pub params: ReconParams,
     /// Keep the work directory after success.
@@ -423,7 +426,14 @@ impl ReconstructConfig {
                 human_bytes(least)
             );
         }
-        paths::output_file(&a.output, paths::PLY)?;
+        let mesh = mesh_target(&a.output, &a.mesh, a.density)?;
+        if let Some(d) = a.trim_density
+            && !(d >= 0.0 && d.is_finite())
+        {
+            bail!(
+                "--trim-density {d}: expected a density (input points per square unit) of 0 or more"
+            );
+        }
         let given: Vec<&Path> = a
             .inputs
             .iter()
@@ -442,8 +452,16 @@ impl ReconstructConfig {
         params.point_weight = point_weight;
         params.fit = !a.no_fit;
         params.gpu = a.gpu.into();
+        params.density = a.density;
+        params.trim_density = a.trim_density;
         let hex = match a.hex {
             Some(h) => {
+                if mesh.format == MeshFormat::Stl {
+                    bail!(
+                        "--hex {}: hexmesh reads the surface as PLY or OBJ; name -o *.ply or *.obj",
+                        h.display()
+                    );
+                }
                 hex_scale(a.hex_scale, "--hex-scale")?;
                 paths::output_file_as("--hex", &h, VOLUME_EXTS, "a hexahedral mesh")?;
                 paths::not_an_input(&h, &given)?;
@@ -477,6 +495,7 @@ impl ReconstructConfig {
             run,
             points,
             output: a.output,
+            mesh,
             params,
             keep_work: a.keep_work,
             hex,
@@ -492,6 +511,8 @@ pub struct MergeConfig {
     pub work_dir: PathBuf,
     /// The mesh to write.
     pub output: PathBuf,
+    /// Its format and normals.
+    pub mesh: MeshTarget,
     /// Keep the work directory after success.
     pub keep_work: bool,
 }
@@ -499,7 +520,7 @@ pub struct MergeConfig {
 impl MergeConfig {
     fn new(a: MergeArgs) -> Result<MergeConfig> {
         let run = RunConfig::new(&a.common)?;
-        paths::output_file(&a.output, paths::PLY)?;
+        let mesh = mesh_target(&a.output, &a.mesh, false)?;
         if !a.work_dir.is_dir() {
             bail!("{}: no such work directory", a.work_dir.display());
         }
@@ -514,9 +535,28 @@ impl MergeConfig {
             run,
             work_dir: a.work_dir,
             output: a.output,
+            mesh,
             keep_work: a.keep_work,
         })
     }
+}
+
+/// The mesh output `-o path`: its format by extension (with `--ascii`), what it can carry
+/// (`--out-normals`, `--density`), and the path's checks ([`paths::output_file_as`]).
+fn mesh_target(path: &Path, o: &MeshOutOpts, density: bool) -> Result<MeshTarget> {
+    let format = MeshFormat::for_path(path, o.ascii)?;
+    format.carries(path, o.out_normals, density)?;
+    paths::output_file_as(
+        "-o",
+        path,
+        &MeshFormat::EXTENSIONS,
+        "a mesh (PLY, OBJ or STL)",
+    )?;
+    Ok(MeshTarget {
+        path: path.to_path_buf(),
+        format,
+        normals: o.out_normals,
+    })
 }
 
 /// `--work-dir` when given (its parent must exist), else `OUTPUT.work`.

@@ -38,7 +38,8 @@ pub fn run(c: &DemoConfig, ctx: &Ctx) -> Result<()> {
     report::demo_synth(&rep, NOISE);
     let points = Points::Files(Inputs::file(ply.clone()), NormalsConfig::default());
     let params = ReconParams::new(DEFAULT_DEPTH, work);
-    let st = reconstruct(ctx, &points, &mesh, &params, false)?;
+    let target = scanflow::io::mesh_write::MeshTarget::ply(&mesh);
+    let st = reconstruct(ctx, &points, &target, &params, false)?;
     let total = t0.elapsed().as_secs_f64();
     let truth = scanflow::synth::truth_path(&ply);
     let check = scanflow::metrics::run_check(&mesh, Some(&truth), None, DEFAULT_CHECK_SAMPLES)?;

@@ -16,7 +16,7 @@ pub fn run(c: &MergeConfig, ctx: &Ctx) -> Result<()> {
         "no output written; the work directory {} is kept: run merge again",
         c.work_dir.display()
     )));
-    let st = scanflow::pipeline::merge(&c.work_dir, &c.output, ctx)?;
+    let st = scanflow::pipeline::merge(&c.work_dir, &c.mesh, ctx)?;
     signals::set_note(Some(format!("{} is complete", c.output.display())));
     report::merge(&st, &c.output);
     if !c.keep_work {

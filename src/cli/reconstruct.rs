@@ -10,6 +10,7 @@ use anyhow::{Result, bail};
 use scanflow::Error;
 use scanflow::exec::Ctx;
 use scanflow::io::atomic;
+use scanflow::io::mesh_write::MeshTarget;
 use scanflow::normals::{NormalParams, NormalsMode};
 use scanflow::pipeline::ingest::{StoreSource, WORK_STORE, open_or_ingest};
 use scanflow::pipeline::workdir::{self, Lease, RunIdentity};
@@ -23,7 +24,7 @@ use super::{paths, report, signals};
 /// Reconstruct and print the summary.
 pub fn run(c: &ReconstructConfig, ctx: &Ctx) -> Result<()> {
     let t0 = std::time::Instant::now();
-    let st = reconstruct(ctx, &c.points, &c.output, &c.params, c.keep_work)?;
+    let st = reconstruct(ctx, &c.points, &c.mesh, &c.params, c.keep_work)?;
     let secs = t0.elapsed().as_secs_f64();
     if c.params.shard.is_split() {
         let work = workdir::resolve(&c.params.work_dir, &c.output)?;
@@ -39,18 +40,18 @@ pub fn run(c: &ReconstructConfig, ctx: &Ctx) -> Result<()> {
 }
 
 /// Open the store, or ingest the point files into the work directory (unless a resumed run
-/// already did), reconstruct into `output`, and remove the work directory unless
+/// already did), reconstruct into `mesh`, and remove the work directory unless
 /// `keep_work`.
 pub fn reconstruct(
     ctx: &Ctx,
     points: &Points,
-    output: &Path,
+    mesh: &MeshTarget,
     params: &ReconParams,
     keep_work: bool,
 ) -> Result<ReconStats> {
     let job = WorkRun {
         points,
-        output,
+        output: &mesh.path,
         work_dir: &params.work_dir,
         resume: params.resume,
         keep_work,
@@ -64,7 +65,7 @@ pub fn reconstruct(
                 work_dir: work.to_path_buf(),
                 ..params.clone()
             };
-            scanflow::pipeline::reconstruct(store, output, &params, ctx)
+            scanflow::pipeline::reconstruct(store, mesh, &params, ctx)
         },
     )
 }

@@ -147,6 +147,11 @@ impl Welder {
         self.next
     }
 
+    /// The global index of each vertex of the last tile added, by its index in the tile.
+    pub fn tile_indices(&self) -> &[u64] {
+        &self.local
+    }
+
     /// Keys held now.
     pub fn frontier_len(&self) -> usize {
         self.frontier.len()

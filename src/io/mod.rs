@@ -17,15 +17,16 @@
 //! * [`xyz`]: XYZ / PTS text (`text.rs` the layouts, tokenizer and line walk, `decode.rs` the
 //!   values);
 //! * [`mesh_read`]: PLY meshes, vertices through [`ply`] and the `face` element (`faces.rs`)
-//!   or a scan's `range_grid` (`range_grid.rs`), for `scanflow check`, `fit` and tests;
+//!   or a scan's `range_grid` (`range_grid.rs`), for `scanflow check`, `fit` and tests, and
+//!   [`mesh_read::read_any_mesh`], which reads OBJ ([`obj`]) and STL ([`stl`]) by extension;
 //! * [`conf`]: the `.conf` scan list (files and their rigid transforms);
 //! * [`mmap`]: the memory-mapped window every binary and text reader reads through.
 //!
 //! Writers, each streaming in memory independent of the file's size:
 //!
 //! * [`ply_write`]: point PLY ([`ply_write::PointPlyWriter`]);
-//! * [`mesh_write`]: the streamed mesh PLY of ARCHITECTURE.md step 5
-//!   ([`mesh_write::MeshPlyWriter`]);
+//! * [`mesh_write`]: the streamed mesh of ARCHITECTURE.md step 5, as PLY (binary or ASCII),
+//!   OBJ or STL ([`mesh_write::MeshWriter`]);
 //! * [`iges`]: tensor-product B-spline surfaces as IGES 5.3 entity 128
 //!   ([`iges::write_iges`]; whole files, small next to the points they were fitted to).
 //!
@@ -45,6 +46,7 @@ pub mod mmap;
 pub mod obj;
 pub mod ply;
 pub mod ply_write;
+pub mod stl;
 pub mod volume;
 pub mod xyz;
 

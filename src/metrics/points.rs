@@ -44,7 +44,7 @@ use serde::Serialize;
 use super::report::read_points;
 use super::{PointIndex, Reference, TriangleIndex, quantile};
 use crate::error::{Error, Result};
-use crate::io::mesh_read::{ply_face_count, read_mesh};
+use crate::io::mesh_read::{is_mesh_file, read_any_mesh};
 use crate::synth::Truth;
 use crate::synth::vec::norm;
 use crate::types::Aabb;
@@ -53,7 +53,7 @@ use crate::types::Aabb;
 /// element or a `face` element without records, or any file that is not a PLY (the point
 /// readers of [`crate::io::open`] decide whether they can read it).
 pub fn is_point_file(path: &Path) -> Result<bool> {
-    Ok(ply_face_count(path)?.unwrap_or(0) == 0)
+    Ok(!is_mesh_file(path)?)
 }
 
 /// Summary of per-point unsigned distances, in input units.
@@ -266,8 +266,8 @@ pub fn run_check_points(
         )
     } else if let Some(path) = reference {
         report.reference = Some(path.to_path_buf());
-        if ply_face_count(path)?.unwrap_or(0) > 0 {
-            let m = read_mesh(path)?;
+        if is_mesh_file(path)? {
+            let m = read_any_mesh(path)?;
             report.against = PointsAgainst::ReferenceMesh;
             (
                 point_distances(&pts, PointTarget::Reference(Reference::Mesh(&m))),

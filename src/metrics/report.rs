@@ -10,7 +10,7 @@ use super::{
     MeshCheck, Reference, ReferenceParams, TwoSided, check_mesh, mesh_to_reference, mesh_to_truth,
 };
 use crate::error::{Error, Result};
-use crate::io::mesh_read::{ply_face_count, read_mesh};
+use crate::io::mesh_read::{is_mesh_file, read_any_mesh};
 use crate::synth::Truth;
 use crate::types::PointBatch;
 
@@ -125,7 +125,7 @@ pub fn run_check_with(
             )));
         }
     }
-    let m = read_mesh(mesh)?;
+    let m = read_any_mesh(mesh)?;
     let check = check_mesh(&m);
     let comparison = if let Some(path) = truth {
         let t = Truth::load(path)?;
@@ -141,8 +141,8 @@ pub fn run_check_with(
             seed: params.seed,
             restrict_to_reference: params.restrict_to_reference,
         };
-        let (against, d) = if ply_face_count(path)?.unwrap_or(0) > 0 {
-            let r = read_mesh(path)?;
+        let (against, d) = if is_mesh_file(path)? {
+            let r = read_any_mesh(path)?;
             (
                 Against::ReferenceMesh,
                 mesh_to_reference(&m, Reference::Mesh(&r), &rp),

@@ -17,7 +17,7 @@ use std::time::Instant;
 use crate::error::{Error, Result};
 use crate::exec::Ctx;
 use crate::io::iges::{IgesMeta, write_iges};
-use crate::io::mesh_write::{MeshPlyWriter, VertexFormat};
+use crate::io::mesh_write::{MeshFormat, MeshWriter, VertexFormat};
 use crate::spline::fit::{Fit, FitParams, fit};
 use crate::spline::graph::Graph;
 use crate::spline::param::{Method, Param, parameterise_facing};
@@ -313,7 +313,8 @@ pub fn write_preview(path: &Path, surfaces: &[TensorSurface]) -> Result<()> {
         .map(|x| hi[x] - lo[x])
         .fold(0.0, f64::max)
         .max(1e-300);
-    let mut w = MeshPlyWriter::create_format(path, VertexFormat::for_cube(lo, size, false, false))?;
+    let vf = VertexFormat::for_cube(lo, size, false, false);
+    let mut w = MeshWriter::create(path, MeshFormat::Ply, vf)?;
     let mut base = 0u64;
     for s in surfaces {
         let dom = s.domain();

@@ -103,22 +103,17 @@ pub struct HexStats {
     pub seconds: [f64; 5],
 }
 
-/// Whether `path` names a closed surface (PLY or OBJ triangles) rather than tetrahedra.
+/// Whether `path` names a closed surface (PLY, OBJ or STL triangles) rather than tetrahedra.
 pub fn is_surface(path: &Path) -> bool {
     let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("");
-    ext.eq_ignore_ascii_case("ply") || ext.eq_ignore_ascii_case("obj")
+    ["ply", "obj", "stl"]
+        .iter()
+        .any(|e| ext.eq_ignore_ascii_case(e))
 }
 
-/// Reads a closed surface (PLY, OBJ).
+/// Reads a closed surface (PLY, OBJ, STL).
 fn read_surface(path: &Path) -> Result<crate::io::mesh_read::Mesh> {
-    let obj = path
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("obj"));
-    let surface = if obj {
-        crate::io::obj::read_obj(path)?
-    } else {
-        crate::io::mesh_read::read_mesh(path)?
-    };
+    let surface = crate::io::mesh_read::read_any_mesh(path)?;
     if surface.triangles.is_empty() {
         return Err(Error::input(
             path,

@@ -1,5 +1,5 @@
 //! `merge`: the tiles a split reconstruction left in its work directory, welded in Morton
-//! order into one binary PLY, byte for byte what one process writes (see
+//! order into one mesh, byte for byte what one process writes (see
 //! [`shard`](super::shard)).
 //!
 //! Every shard writes the same description (`merge.json`: the plan, the iso-value, the
@@ -13,11 +13,12 @@ use std::time::Instant;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use super::tiles::MeshSink;
+use super::tiles::{MeshSink, VertexAttrs};
 use super::workdir;
 use crate::error::{Error, Result};
 use crate::exec::Ctx;
 use crate::io::atomic::{self, Durability};
+use crate::io::mesh_write::MeshTarget;
 use crate::recon::Plan;
 use crate::recon::checkpoint::{read_tile, tile_path};
 use crate::types::demorton3;
@@ -42,6 +43,8 @@ pub struct MergeDescription {
     pub with_color: bool,
     /// Whether vertices carry intensities.
     pub with_intensity: bool,
+    /// Whether vertices carry sampling densities (`--density`).
+    pub with_density: bool,
     /// The store reconstructed, which errors about the result name.
     pub input: PathBuf,
     /// The tiles that can hold surface, by Morton index, increasing.
@@ -92,8 +95,8 @@ pub struct MergeStats {
     pub secs: f64,
 }
 
-/// Weld the tiles a split run left in `work` into the PLY mesh `out`.
-pub fn merge(work: &Path, out: &Path, ctx: &Ctx) -> Result<MergeStats> {
+/// Weld the tiles a split run left in `work` into the mesh `out`.
+pub fn merge(work: &Path, out: &MeshTarget, ctx: &Ctx) -> Result<MergeStats> {
     let t0 = Instant::now();
     if !workdir::is_work_dir(work) {
         return Err(Error::input(
@@ -111,6 +114,8 @@ pub fn merge(work: &Path, out: &Path, ctx: &Ctx) -> Result<MergeStats> {
             "no shard of a split run (reconstruct --shard) has reached its tiles in this work directory: run merge after the shards",
         )
     })?;
+    // The shards measured densities for --density: only PLY holds them.
+    out.format.carries(&out.path, out.normals, d.with_density)?;
     let tiles_dir = workdir::tiles_dir(work);
     let missing: Vec<u64> = d
         .tiles
@@ -142,7 +147,12 @@ pub fn merge(work: &Path, out: &Path, ctx: &Ctx) -> Result<MergeStats> {
             ),
         ));
     }
-    let mut sink = MeshSink::create(&d.plan, d.with_color, d.with_intensity, out)?;
+    let attrs = VertexAttrs {
+        color: d.with_color,
+        intensity: d.with_intensity,
+        density: d.with_density,
+    };
+    let mut sink = MeshSink::create(&d.plan, attrs, out)?;
     let stage = ctx
         .progress
         .stage("merge", Some(d.tiles.len() as u64), "tiles");

@@ -4,7 +4,7 @@
 //! Morton-order waves (`pipeline::tiles`), welded and streamed to the writer.
 
 use std::collections::BTreeSet;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::Mutex;
 use std::time::Instant;
 
@@ -19,6 +19,7 @@ use super::workdir::{self, WorkDir};
 use crate::error::{Error, Result};
 use crate::exec::Ctx;
 use crate::exec::budget::{Permit, Share};
+use crate::io::mesh_write::MeshTarget;
 use crate::recon::checkpoint::{LeafSummary, leaf_path, read_leaf_summary, write_leaf};
 use crate::recon::pou::unit_for;
 use crate::recon::{
@@ -65,6 +66,12 @@ pub struct ReconParams {
     pub min_points: u64,
     /// Leave the surface open where no input point is within two coarse voxels.
     pub trim: bool,
+    /// Give each vertex its sampling density (input points per square unit, from its
+    /// [`crate::surface::FIT_NEIGHBOURS`] nearest points), written as the PLY's `quality`.
+    pub density: bool,
+    /// Drop the triangles whose corners' mean sampling density is below this (input points
+    /// per square unit): PoissonRecon's trimming by density, as a threshold.
+    pub trim_density: Option<f64>,
     /// Tile fields and marching cubes on the GPU: auto (a real GPU when there is one), on,
     /// off (the default: the GPU path is not yet measured faster end to end, see
     /// `extract::gpu`).
@@ -78,6 +85,11 @@ pub struct ReconParams {
 }
 
 impl ReconParams {
+    /// Whether the vertices' sampling densities are measured (written or trimmed by).
+    pub fn measures_density(&self) -> bool {
+        self.density || self.trim_density.is_some()
+    }
+
     /// Defaults for `depth` with work directory `work_dir`.
     pub fn new(depth: u32, work_dir: PathBuf) -> ReconParams {
         ReconParams {
@@ -91,6 +103,8 @@ impl ReconParams {
             error: DEFAULT_ERROR,
             min_points: DEFAULT_MIN_POINTS,
             trim: false,
+            density: false,
+            trim_density: None,
             gpu: crate::extract::gpu::GpuMode::Off,
             shard: Shard::ALL,
         }
@@ -142,12 +156,12 @@ pub struct ReconStats {
     pub secs: f64,
 }
 
-/// Reconstruct the surface of the points in `store` into the PLY mesh `out`; a split run
+/// Reconstruct the surface of the points in `store` into the mesh `out`; a split run
 /// (`params.shard`) does its slice of the leaves and tiles and leaves the mesh to
 /// [`merge()`](crate::pipeline::merge()) (`out` is not written).
 pub fn reconstruct(
     store: &Store,
-    out: &Path,
+    out: &MeshTarget,
     params: &ReconParams,
     ctx: &Ctx,
 ) -> Result<ReconStats> {
@@ -171,7 +185,8 @@ pub fn reconstruct(
     let leaves = leaf_pass(store, &plan, params, &mut coarse, &dirs, &mut src, ctx)?;
     let m = &store.manifest;
     let (with_color, with_intensity) = (m.attributes.color, m.attributes.intensity);
-    let points = (with_color || with_intensity || params.fit).then(|| Mutex::new(src));
+    let points = (with_color || with_intensity || params.fit || params.measures_density())
+        .then(|| Mutex::new(src));
     let job = TileJob {
         plan: &plan,
         params,
@@ -198,6 +213,7 @@ pub fn reconstruct(
                 iso: leaves.iso,
                 with_color,
                 with_intensity,
+                with_density: params.density,
                 input: store.dir.clone(),
                 tiles: nonempty.clone(),
             },

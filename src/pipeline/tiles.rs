@@ -3,7 +3,7 @@
 //! the GPU, fitted to the input points and coloured, trimmed, checkpointed, then welded and
 //! streamed to the writer in Morton order.
 
-use std::collections::{BTreeSet, HashSet};
+use std::collections::{BTreeMap, BTreeSet, HashMap, HashSet};
 use std::path::Path;
 use std::sync::{Arc, Mutex};
 
@@ -20,10 +20,10 @@ use crate::extract::cpu::McWorkspace;
 use crate::extract::field::BlendEval;
 use crate::extract::gpu::GpuExtractor;
 use crate::extract::weld::Welder;
-use crate::io::mesh_write::{MeshPlyWriter, VertexFormat};
+use crate::io::mesh_write::{MeshTarget, MeshWriter, VertexFormat};
 use crate::recon::checkpoint::{read_tile, tile_path, write_tile};
 use crate::recon::{CoarseField, Plan, leaves_near, pou, tile_blend};
-use crate::surface::{NearPoints, Support, settle, trim_mesh};
+use crate::surface::{NearPoints, Support, settle, trim_by_density, trim_mesh};
 use crate::types::{CellKey, Detail, EdgeKey, GridGeom, TileMesh, demorton3, morton3};
 
 /// Bytes a tile node holds while its field is built: the blend's i64 accumulator (8) and the
@@ -100,7 +100,7 @@ pub fn run(
     job: &TileJob,
     tiles: &[u64],
     points: SharedPoints,
-    out: Option<&Path>,
+    out: Option<&MeshTarget>,
     ctx: &Ctx,
 ) -> Result<TileStats> {
     let plan = job.plan;
@@ -119,8 +119,11 @@ pub fn run(
     let mut sink = match out {
         Some(out) => Some(MeshSink::create(
             plan,
-            job.with_color,
-            job.with_intensity,
+            VertexAttrs {
+                color: job.with_color,
+                intensity: job.with_intensity,
+                density: job.params.density,
+            },
             out,
         )?),
         None => None,
@@ -232,10 +235,19 @@ fn tile_box(plan: &Plan, t: u64) -> ([i64; 3], [i64; 3]) {
     (lo, lo.map(|v| v + plan.tile as i64))
 }
 
-/// Tiles welded in Morton order and streamed into a PLY mesh: the end of a run in one
-/// process, and `merge`'s for a split run, so both write the same bytes.
+/// What the output's vertices carry from the tiles.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct VertexAttrs {
+    pub color: bool,
+    pub intensity: bool,
+    pub density: bool,
+}
+
+/// The welder and the writer of a run's mesh: tiles in, in Morton order; vertices and
+/// triangles out as soon as they are final (with their normals once their last triangle is
+/// known).
 pub(super) struct MeshSink {
-    writer: std::cell::RefCell<MeshPlyWriter>,
+    writer: std::cell::RefCell<MeshWriter>,
     welder: Welder,
     /// The cube's lower corner, which the writer adds back to the tiles' positions.
     origin: [f64; 3],
@@ -243,23 +255,117 @@ pub(super) struct MeshSink {
     tile: u64,
     ntiles_axis: u64,
     spacing: f64,
+    /// Vertex normals being summed, with `--out-normals`.
+    normals: Option<NormalSums>,
+}
+
+/// The area-weighted normals of the vertices whose triangles are not all welded yet.
+///
+/// A vertex's normal is the sum of its triangles' cross products `(b − a) × (c − a)`, each
+/// taken from the corner with the smallest edge key and the sum taken in sorted order, so it
+/// is the same number whichever tile holds which triangle (any `--tile`, any shard count).
+/// A vertex is complete after the last tile that can hold its edge; until then it holds its
+/// triangles' vectors (memory follows the welder's frontier).
+#[derive(Default)]
+struct NormalSums {
+    /// Each incomplete vertex's triangle vectors, by global index.
+    pending: HashMap<u64, Vec<[f64; 3]>>,
+    /// Incomplete vertices by the tile after which they are complete.
+    expiry: BTreeMap<u64, Vec<u64>>,
+}
+
+impl NormalSums {
+    /// Add tile `tt`'s triangles (its vertices' global indices `global`, those from `first_new`
+    /// on new, completed after tile `last_tile(key)`), then give the writer the normals of the
+    /// vertices complete after this tile.
+    fn add(
+        &mut self,
+        tt: u64,
+        mesh: &TileMesh,
+        global: &[u64],
+        first_new: u64,
+        last_tile: impl Fn(EdgeKey) -> u64,
+        writer: &mut MeshWriter,
+    ) -> Result<()> {
+        for (i, &g) in global.iter().enumerate() {
+            if g >= first_new {
+                self.expiry
+                    .entry(last_tile(mesh.keys[i]))
+                    .or_default()
+                    .push(g);
+            }
+        }
+        for t in &mesh.triangles {
+            let t = t.map(|i| i as usize);
+            // From the corner with the smallest key, winding kept.
+            let r = (0..3)
+                .min_by_key(|&k| mesh.keys[t[k]].0)
+                .expect("three corners");
+            let [a, b, c] = [t[r], t[(r + 1) % 3], t[(r + 2) % 3]].map(|i| mesh.positions[i]);
+            let u = [0, 1, 2].map(|d| b[d] - a[d]);
+            let v = [0, 1, 2].map(|d| c[d] - a[d]);
+            let n = [
+                u[1] * v[2] - u[2] * v[1],
+                u[2] * v[0] - u[0] * v[2],
+                u[0] * v[1] - u[1] * v[0],
+            ];
+            for &i in &t {
+                self.pending.entry(global[i]).or_default().push(n);
+            }
+        }
+        self.release(Some(tt), writer)
+    }
+
+    /// Give the writer the normals of the vertices complete after tile `upto` (`None`: all
+    /// left, at the end: their last tiles held no surface).
+    fn release(&mut self, upto: Option<u64>, writer: &mut MeshWriter) -> Result<()> {
+        while let Some(entry) = self.expiry.first_entry() {
+            if upto.is_some_and(|tt| *entry.key() > tt) {
+                break;
+            }
+            for g in entry.remove() {
+                let mut ns = self.pending.remove(&g).unwrap_or_default();
+                ns.sort_by(|p, q| {
+                    (p[0].total_cmp(&q[0]))
+                        .then(p[1].total_cmp(&q[1]))
+                        .then(p[2].total_cmp(&q[2]))
+                });
+                let mut s = [0f64; 3];
+                for n in &ns {
+                    for d in 0..3 {
+                        s[d] += n[d];
+                    }
+                }
+                let len = (s[0] * s[0] + s[1] * s[1] + s[2] * s[2]).sqrt();
+                let unit = if len > 0.0 && len.is_finite() {
+                    s.map(|x| (x / len) as f32)
+                } else {
+                    [0.0; 3]
+                };
+                writer.normal(g, unit)?;
+            }
+        }
+        Ok(())
+    }
 }
 
 impl MeshSink {
-    /// A sink writing `out` for tiles of `plan`, with colours or intensities where the points
-    /// have them.
-    pub(super) fn create(
-        plan: &Plan,
-        with_color: bool,
-        with_intensity: bool,
-        out: &Path,
-    ) -> Result<MeshSink> {
+    /// A sink writing `out` for tiles of `plan`, its vertices carrying `attrs`.
+    pub(super) fn create(plan: &Plan, attrs: VertexAttrs, out: &MeshTarget) -> Result<MeshSink> {
         // Vertices are written in float32 only where it keeps the input's resolution
         // (georeferenced coordinates get float64; see `io::mesh_write`).
-        let format =
-            VertexFormat::for_cube(plan.cube.origin, plan.cube.size, with_color, with_intensity);
+        let format = VertexFormat {
+            normals: out.normals,
+            density: attrs.density,
+            ..VertexFormat::for_cube(
+                plan.cube.origin,
+                plan.cube.size,
+                attrs.color,
+                attrs.intensity,
+            )
+        };
         Ok(MeshSink {
-            writer: std::cell::RefCell::new(MeshPlyWriter::create_format(out, format)?),
+            writer: std::cell::RefCell::new(MeshWriter::create(&out.path, out.format, format)?),
             welder: Welder::new(),
             origin: plan.cube.origin,
             geom: GridGeom {
@@ -270,6 +376,7 @@ impl MeshSink {
             tile: plan.tile,
             ntiles_axis: plan.fine_cells / plan.tile,
             spacing: plan.spacing,
+            normals: out.normals.then(NormalSums::default),
         })
     }
 
@@ -280,6 +387,7 @@ impl MeshSink {
             let (node, _axis) = geom.decode_edge(key);
             morton3(node.map(|v| (v / tile).min(n - 1) as u32))
         };
+        let first_new = self.welder.vertices();
         // Both welder callbacks write to the one writer.
         let writer = &self.writer;
         self.welder.add_tile(
@@ -291,16 +399,32 @@ impl MeshSink {
                     [0, 1, 2].map(|d| p[d] + origin[d]),
                     mesh.colors.get(i).copied(),
                     mesh.intensity.get(i).copied(),
+                    mesh.density.get(i).copied(),
                 )
             },
             |tri| writer.borrow_mut().triangle(tri),
-        )
+        )?;
+        if let Some(sums) = self.normals.as_mut() {
+            let global = self.welder.tile_indices();
+            sums.add(
+                tt,
+                mesh,
+                global,
+                first_new,
+                last_tile,
+                &mut self.writer.borrow_mut(),
+            )?;
+        }
+        Ok(())
     }
 
     /// Complete the mesh: vertices, faces and the welder's largest frontier. A mesh without a
     /// triangle is an error naming `input` (nothing appears under the output's name).
     pub(super) fn finish(self, input: &Path, iso: f64, depth: u32) -> Result<(u64, u64, usize)> {
-        let writer = self.writer.into_inner();
+        let mut writer = self.writer.into_inner();
+        if let Some(mut sums) = self.normals {
+            sums.release(None, &mut writer)?;
+        }
         if writer.triangles() == 0 {
             // Dropping the writer removes its temporary files.
             return Err(Error::input(
@@ -493,6 +617,12 @@ fn finish_tile(
     if let Some(cp) = cp {
         fit_tile(job, points, &mut mesh, cp)?;
     }
+    if let Some(least) = job.params.trim_density {
+        trim_by_density(&mut mesh, least);
+        if !job.params.density {
+            mesh.density.clear();
+        }
+    }
     write_tile(&tile_path(job.tiles_dir, tt), &mesh)?;
     Ok((tt, mesh))
 }
@@ -517,7 +647,8 @@ fn fit_tile(
         h,
         n: job.plan.fine_cells,
     };
-    let (mut fits, inexact) = cp.fit_vertices(&mesh.positions, &mesh.keys, &geom, fit);
+    let density = job.params.measures_density();
+    let (mut fits, inexact) = cp.fit_vertices(&mesh.positions, &mesh.keys, &geom, fit, density);
     // Vertices whose neighbours may lie beyond the gathered box: their true neighbours lie
     // within their current farthest one, so one wider gather around them is exact (rare:
     // vertices far from every point).
@@ -542,7 +673,7 @@ fn fit_tile(
             lock(src)?.near_points(lo, hi, reach * (1.0 + 1e-9) + h * 1e-6)?,
             o,
         );
-        let (fixed, _) = wide.fit_vertices(&vs, &ks, &geom, fit);
+        let (fixed, _) = wide.fit_vertices(&vs, &ks, &geom, fit, density);
         for (&vi, f) in inexact.iter().zip(fixed) {
             fits[vi] = f;
         }
@@ -561,6 +692,9 @@ fn fit_tile(
     }
     if job.with_intensity {
         mesh.intensity = fits.iter().map(|f| f.intensity).collect();
+    }
+    if density {
+        mesh.density = fits.iter().map(|f| f.density).collect();
     }
     Ok(())
 }

@@ -132,6 +132,13 @@ impl RunIdentity {
             ("--min-points", params.min_points.to_string()),
             ("--trim", params.trim.to_string()),
             ("--no-fit", (!params.fit).to_string()),
+            ("--density", params.density.to_string()),
+            (
+                "--trim-density",
+                params
+                    .trim_density
+                    .map_or_else(|| "none".to_string(), |d| d.to_string()),
+            ),
         ];
         RunIdentity::with_options(source, normals, normal_params, &options)
     }

@@ -166,11 +166,11 @@ pub fn leaf_detail(dir: &Path, key: CellKey, m: usize) -> Result<Detail> {
     })
 }
 
-/// Tile checkpoints: this magic, then the counts of vertices, triangles, colours and
-/// intensities (u64 each), then the records ([`write_tile`]).
-const TILE_MAGIC: &[u8; 8] = b"SFTILE07";
-/// Bytes of a tile checkpoint's header: magic and four counts.
-const TILE_HEADER: usize = 40;
+/// Tile checkpoints: this magic, then the counts of vertices, triangles, colours,
+/// intensities and densities (u64 each), then the records ([`write_tile`]).
+const TILE_MAGIC: &[u8; 8] = b"SFTILE08";
+/// Bytes of a tile checkpoint's header: magic and five counts.
+const TILE_HEADER: usize = 48;
 /// Bytes of a tile checkpoint's vertex: edge key (u64) and position (f64×3).
 const TILE_VERTEX_BYTES: usize = 32;
 /// Bytes of a tile checkpoint's triangle: three u32 indices.
@@ -182,7 +182,7 @@ pub fn tile_path(dir: &Path, t: u64) -> PathBuf {
 }
 
 /// Checkpoint a tile's mesh (after trimming): edge keys, f64 positions, triangles, then the
-/// vertex colours when there are any.
+/// vertex colours, intensities and densities when there are any.
 pub fn write_tile(path: &Path, m: &TileMesh) -> Result<()> {
     let mut raw = Vec::with_capacity(
         TILE_HEADER
@@ -194,6 +194,7 @@ pub fn write_tile(path: &Path, m: &TileMesh) -> Result<()> {
     raw.extend_from_slice(&(m.triangles.len() as u64).to_le_bytes());
     raw.extend_from_slice(&(m.colors.len() as u64).to_le_bytes());
     raw.extend_from_slice(&(m.intensity.len() as u64).to_le_bytes());
+    raw.extend_from_slice(&(m.density.len() as u64).to_le_bytes());
     for k in &m.keys {
         raw.extend_from_slice(&k.0.to_le_bytes());
     }
@@ -210,7 +211,7 @@ pub fn write_tile(path: &Path, m: &TileMesh) -> Result<()> {
     for c in &m.colors {
         raw.extend_from_slice(c);
     }
-    for v in &m.intensity {
+    for v in m.intensity.iter().chain(&m.density) {
         raw.extend_from_slice(&v.to_le_bytes());
     }
     let z = zstd::bulk::compress(&raw, ZSTD_LEVEL)
@@ -242,11 +243,18 @@ pub fn read_tile(path: &Path) -> Result<TileMesh> {
         u64::from_le_bytes(a)
     };
     let (nv, nt) = (u64_at(8) as usize, u64_at(16) as usize);
-    let (nc, ni) = (u64_at(24) as usize, u64_at(32) as usize);
-    if !(nc == 0 || nc == nv)
-        || !(ni == 0 || ni == nv)
+    let (nc, ni, nd) = (
+        u64_at(24) as usize,
+        u64_at(32) as usize,
+        u64_at(40) as usize,
+    );
+    if [nc, ni, nd].iter().any(|&n| !(n == 0 || n == nv))
         || raw.len()
-            != TILE_HEADER + nv * TILE_VERTEX_BYTES + nt * TILE_TRIANGLE_BYTES + nc * 3 + ni * 4
+            != TILE_HEADER
+                + nv * TILE_VERTEX_BYTES
+                + nt * TILE_TRIANGLE_BYTES
+                + nc * 3
+                + (ni + nd) * 4
     {
         return Err(bad("wrong size"));
     }
@@ -273,10 +281,13 @@ pub fn read_tile(path: &Path) -> Result<TileMesh> {
         m.colors.push([c[0], c[1], c[2]]);
     }
     o += nc * 3;
-    for v in raw[o..].chunks_exact(4) {
-        m.intensity
-            .push(f32::from_le_bytes([v[0], v[1], v[2], v[3]]));
-    }
+    let f32s = |b: &[u8]| -> Vec<f32> {
+        b.chunks_exact(4)
+            .map(|v| f32::from_le_bytes([v[0], v[1], v[2], v[3]]))
+            .collect()
+    };
+    m.intensity = f32s(&raw[o..o + ni * 4]);
+    m.density = f32s(&raw[o + ni * 4..]);
     Ok(m)
 }
 
@@ -348,5 +359,33 @@ mod tests {
         std::fs::write(leaf_path(dir.path(), key), b"not zstd").unwrap();
         let e = read_leaf(dir.path(), key, m).unwrap_err().to_string();
         assert!(e.contains("corrupt leaf checkpoint"), "{e}");
+    }
+
+    #[test]
+    fn tile_checkpoints_round_trip_with_every_attribute() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = tile_path(dir.path(), 5);
+        let mut m = TileMesh {
+            keys: vec![EdgeKey(3), EdgeKey(9), EdgeKey(12)],
+            positions: vec![[0.5, 1.0, 2.0], [1.5, -1.0, 0.25], [3.0, 2.0, 1.0]],
+            triangles: vec![[0, 1, 2]],
+            ..TileMesh::default()
+        };
+        write_tile(&path, &m).unwrap();
+        assert_eq!(read_tile(&path).unwrap(), m);
+        m.colors = vec![[1, 2, 3], [4, 5, 6], [7, 8, 9]];
+        m.density = vec![10.5, 20.0, 4.25];
+        write_tile(&path, &m).unwrap();
+        assert_eq!(read_tile(&path).unwrap(), m);
+        m.intensity = vec![0.5, 0.25, 1.0];
+        write_tile(&path, &m).unwrap();
+        assert_eq!(read_tile(&path).unwrap(), m);
+        // A density per vertex or none: anything else is corrupt.
+        let raw = zstd::stream::decode_all(&std::fs::read(&path).unwrap()[..]).unwrap();
+        let mut bad = raw.clone();
+        bad[40] = 2;
+        std::fs::write(&path, zstd::bulk::compress(&bad, 1).unwrap()).unwrap();
+        let e = read_tile(&path).unwrap_err().to_string();
+        assert!(e.contains("corrupt tile checkpoint"), "{e}");
     }
 }

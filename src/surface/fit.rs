@@ -60,6 +60,11 @@ pub struct VertexFit {
     pub intensity: f32,
     /// Farthest neighbour used: the answer is exact when the gathered box reaches beyond it.
     pub reach: f64,
+    /// Sampling density at the vertex, input points per square unit: `k / (π r²)` for its
+    /// `k` nearest points ([`FIT_NEIGHBOURS`] when fitting or asked for, else the colour's
+    /// neighbours) within distance `r` of it, the farthest's (0 where it has no neighbour
+    /// at a distance).
+    pub density: f32,
 }
 
 impl NearPoints {
@@ -69,13 +74,15 @@ impl NearPoints {
     /// and its colour and intensity ([`blend_colour`]). Neighbours are
     /// ordered by distance, then position, then colour, so the answer depends only on the
     /// point set and the vertex. Also returns the vertices whose answer may not be exact:
-    /// their farthest neighbour lies beyond the gathered box's faces.
+    /// their farthest neighbour lies beyond the gathered box's faces. `density` asks for
+    /// the [`VertexFit::density`] from [`FIT_NEIGHBOURS`] points even without fitting.
     pub fn fit_vertices(
         &self,
         vertices: &[[f64; 3]],
         keys: &[EdgeKey],
         geom: &GridGeom,
         fit: Option<f64>,
+        density: bool,
     ) -> (Vec<VertexFit>, Vec<usize>) {
         debug_assert_eq!(vertices.len(), keys.len());
         let h = geom.h;
@@ -88,12 +95,13 @@ impl NearPoints {
                     color: [128; 3],
                     intensity: 0.0,
                     reach: 0.0,
+                    density: 0.0,
                 })
                 .collect();
             return (out, Vec::new());
         }
         let grid = PointGrid::new(&self.pos, self.lo, self.hi, POINT_GRID_CELL_VOXELS * h);
-        let want = if fit.is_some() {
+        let want = if fit.is_some() || density {
             FIT_NEIGHBOURS
         } else {
             COLOUR_NEIGHBOURS
@@ -109,6 +117,11 @@ impl NearPoints {
                 grid.nearest(*v, k, &mut found);
                 let nb = self.neighbours(&found, want);
                 let reach = nb.last().map_or(0.0, |x| x.0.sqrt());
+                let density = if reach > 0.0 {
+                    (nb.len() as f64 / (std::f64::consts::PI * reach * reach)) as f32
+                } else {
+                    0.0
+                };
                 let room = (0..3)
                     .map(|a| (v[a] - self.lo[a]).min(self.hi[a] - v[a]))
                     .fold(f64::INFINITY, f64::min);
@@ -155,6 +168,7 @@ impl NearPoints {
                     color,
                     intensity,
                     reach,
+                    density,
                 }
             })
             .collect();

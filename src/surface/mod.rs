@@ -89,4 +89,4 @@ pub mod trim;
 
 pub use fit::{FIT_NEIGHBOURS, NearPoints, VertexFit};
 pub use settle::settle;
-pub use trim::{Support, trim_mesh};
+pub use trim::{Support, trim_by_density, trim_mesh};

@@ -126,6 +126,7 @@ mod tests {
             color: [0; 3],
             intensity: 0.0,
             reach: 0.0,
+            density: 0.0,
         }
     }
 

@@ -59,38 +59,53 @@ impl Support {
 
 /// Keep the triangles whose centroid `keep` accepts, and only the vertices they use.
 pub fn trim_mesh(mesh: &mut TileMesh, keep: impl Fn([f64; 3]) -> bool) {
+    retain_triangles(mesh, |m, t| {
+        let p = t.map(|i| m.positions[i as usize]);
+        keep([0, 1, 2].map(|a| (p[0][a] + p[1][a] + p[2][a]) / 3.0))
+    });
+}
+
+/// Keep the triangles whose corners' mean sampling density (`mesh.density`: input points
+/// per square unit) is at least `least`, and only the vertices they use (`--trim-density`).
+/// A mesh without densities is left as it is.
+pub fn trim_by_density(mesh: &mut TileMesh, least: f64) {
+    if mesh.density.len() != mesh.positions.len() {
+        return;
+    }
+    retain_triangles(mesh, |m, t| {
+        let sum: f64 = t.iter().map(|&i| f64::from(m.density[i as usize])).sum();
+        sum / 3.0 >= least
+    });
+}
+
+/// Keep the triangles `keep` accepts, and only the vertices they use, with their attributes,
+/// in their order of first use.
+fn retain_triangles(mesh: &mut TileMesh, keep: impl Fn(&TileMesh, [u32; 3]) -> bool) {
     let mut used = vec![u32::MAX; mesh.positions.len()];
-    let mut tris = Vec::with_capacity(mesh.triangles.len());
-    let mut keys = Vec::new();
-    let mut positions = Vec::new();
-    let mut colors = Vec::new();
-    let mut intensity = Vec::new();
-    for t in &mesh.triangles {
-        let p = t.map(|i| mesh.positions[i as usize]);
-        let c = [0, 1, 2].map(|a| (p[0][a] + p[1][a] + p[2][a]) / 3.0);
-        if !keep(c) {
+    let mut out = TileMesh::default();
+    for &t in &mesh.triangles {
+        if !keep(mesh, t) {
             continue;
         }
         let nt = t.map(|i| {
             let i = i as usize;
             if used[i] == u32::MAX {
-                used[i] = keys.len() as u32;
-                keys.push(mesh.keys[i]);
-                positions.push(mesh.positions[i]);
+                used[i] = out.keys.len() as u32;
+                out.keys.push(mesh.keys[i]);
+                out.positions.push(mesh.positions[i]);
                 if let Some(c) = mesh.colors.get(i) {
-                    colors.push(*c);
+                    out.colors.push(*c);
                 }
                 if let Some(v) = mesh.intensity.get(i) {
-                    intensity.push(*v);
+                    out.intensity.push(*v);
+                }
+                if let Some(v) = mesh.density.get(i) {
+                    out.density.push(*v);
                 }
             }
             used[i]
         });
-        tris.push(nt);
+        out.triangles.push(nt);
     }
-    mesh.triangles = tris;
-    mesh.keys = keys;
-    mesh.positions = positions;
-    mesh.colors = colors;
-    mesh.intensity = intensity;
+    *mesh = out;
 }

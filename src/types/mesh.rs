@@ -92,6 +92,9 @@ pub struct TileMesh {
     pub colors: Vec<[u8; 3]>,
     /// Intensity of each vertex (empty when the input points have none).
     pub intensity: Vec<f32>,
+    /// Sampling density at each vertex, input points per square unit (empty unless asked
+    /// for: `--density`, `--trim-density`).
+    pub density: Vec<f32>,
 }
 
 impl TileMesh {
@@ -102,6 +105,7 @@ impl TileMesh {
         self.triangles.clear();
         self.colors.clear();
         self.intensity.clear();
+        self.density.clear();
     }
 }
 

@@ -8,6 +8,7 @@ mod corpus;
 mod data;
 mod degenerate;
 mod fit;
+mod formats;
 mod hex;
 mod iges;
 mod ingest;
