@@ -105,6 +105,15 @@ pub struct MeshOutOpts {
     /// nz, OBJ vn; PoissonRecon's --normals output). STL always has each triangle's.
     #[arg(long)]
     pub out_normals: bool,
+    /// Write a picture of the mesh here (PNG: front, side and isometric views, drawn as the
+    /// mesh is written).
+    #[arg(long, value_name = "PNG")]
+    pub preview: Option<PathBuf>,
+    /// Write a report of the run here: .html (one self-contained page: inputs, options,
+    /// stage times, memory over time, the leaf map, the mesh's check and its picture) or
+    /// .json (the same figures).
+    #[arg(long, value_name = "HTML|JSON")]
+    pub report: Option<PathBuf>,
 }
 
 /// `--normals`.

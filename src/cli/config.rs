@@ -369,6 +369,8 @@ pub struct ReconstructConfig {
     pub output: PathBuf,
     /// Its format and normals.
     pub mesh: MeshTarget,
+    /// The picture and report.
+    pub outputs: RunOutputs,
     /// Depth, smoothing, refinement, tiles, GPU, work directory, resume.
     pub params: ReconParams,
     /// Keep the work directory after success.
@@ -426,7 +428,7 @@ impl ReconstructConfig {
                 human_bytes(least)
             );
         }
-        let mesh = mesh_target(&a.output, &a.mesh, a.density)?;
+        let (mesh, outputs) = mesh_target(&a.output, &a.mesh, a.density)?;
         if let Some(d) = a.trim_density
             && !(d >= 0.0 && d.is_finite())
         {
@@ -484,6 +486,12 @@ impl ReconstructConfig {
         };
         let points = Points::new(a.inputs, a.conf, &a.normal)?;
         if let Some(text) = &a.shard {
+            if let Some(p) = &a.mesh.preview {
+                bail!(
+                    "--preview {}: a shard writes no mesh to draw; give --preview to merge",
+                    p.display()
+                );
+            }
             params.shard = Shard::parse(text, |k| std::env::var(k).ok())?;
             if let Points::Files(..) = points {
                 bail!(
@@ -496,6 +504,7 @@ impl ReconstructConfig {
             points,
             output: a.output,
             mesh,
+            outputs,
             params,
             keep_work: a.keep_work,
             hex,
@@ -513,6 +522,8 @@ pub struct MergeConfig {
     pub output: PathBuf,
     /// Its format and normals.
     pub mesh: MeshTarget,
+    /// The picture and report.
+    pub outputs: RunOutputs,
     /// Keep the work directory after success.
     pub keep_work: bool,
 }
@@ -520,7 +531,7 @@ pub struct MergeConfig {
 impl MergeConfig {
     fn new(a: MergeArgs) -> Result<MergeConfig> {
         let run = RunConfig::new(&a.common)?;
-        let mesh = mesh_target(&a.output, &a.mesh, false)?;
+        let (mesh, outputs) = mesh_target(&a.output, &a.mesh, false)?;
         if !a.work_dir.is_dir() {
             bail!("{}: no such work directory", a.work_dir.display());
         }
@@ -536,14 +547,16 @@ impl MergeConfig {
             work_dir: a.work_dir,
             output: a.output,
             mesh,
+            outputs,
             keep_work: a.keep_work,
         })
     }
 }
 
 /// The mesh output `-o path`: its format by extension (with `--ascii`), what it can carry
-/// (`--out-normals`, `--density`), and the path's checks ([`paths::output_file_as`]).
-fn mesh_target(path: &Path, o: &MeshOutOpts, density: bool) -> Result<MeshTarget> {
+/// (`--out-normals`, `--density`), the path's checks ([`paths::output_file_as`]), and the
+/// picture and report files.
+fn mesh_target(path: &Path, o: &MeshOutOpts, density: bool) -> Result<(MeshTarget, RunOutputs)> {
     let format = MeshFormat::for_path(path, o.ascii)?;
     format.carries(path, o.out_normals, density)?;
     paths::output_file_as(
@@ -552,11 +565,47 @@ fn mesh_target(path: &Path, o: &MeshOutOpts, density: bool) -> Result<MeshTarget
         &MeshFormat::EXTENSIONS,
         "a mesh (PLY, OBJ or STL)",
     )?;
-    Ok(MeshTarget {
+    if let Some(p) = &o.preview {
+        paths::output_file_as("--preview", p, &["png"], "a PNG picture")?;
+    }
+    if let Some(p) = &o.report {
+        paths::output_file_as("--report", p, &["html", "json"], "an HTML or JSON report")?;
+    }
+    for (opt, p) in [("--preview", &o.preview), ("--report", &o.report)] {
+        if p.as_deref() == Some(path) {
+            bail!("{opt} {}: the same file as -o", path.display());
+        }
+    }
+    if o.preview.is_some() && o.preview == o.report {
+        bail!("--report: the same file as --preview");
+    }
+    let html = o.report.as_ref().is_some_and(|r| {
+        r.extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("html"))
+    });
+    let mesh = MeshTarget {
         path: path.to_path_buf(),
         format,
         normals: o.out_normals,
-    })
+        preview: (o.preview.is_some() || html).then_some(PREVIEW_SIDE),
+    };
+    let outputs = RunOutputs {
+        preview: o.preview.clone(),
+        report: o.report.clone(),
+    };
+    Ok((mesh, outputs))
+}
+
+/// Pixels a side of each of the preview's three views.
+const PREVIEW_SIDE: usize = 400;
+
+/// The picture and report a run writes besides its mesh.
+#[derive(Debug, Clone, Default)]
+pub struct RunOutputs {
+    /// `--preview`.
+    pub preview: Option<PathBuf>,
+    /// `--report`.
+    pub report: Option<PathBuf>,
 }
 
 /// `--work-dir` when given (its parent must exist), else `OUTPUT.work`.

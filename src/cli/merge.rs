@@ -8,6 +8,7 @@ use scanflow::exec::Ctx;
 use scanflow::pipeline::workdir;
 
 use super::config::MergeConfig;
+use super::run_report::RunStart;
 use super::{report, signals};
 
 /// Merge and print the summary.
@@ -16,9 +17,27 @@ pub fn run(c: &MergeConfig, ctx: &Ctx) -> Result<()> {
         "no output written; the work directory {} is kept: run merge again",
         c.work_dir.display()
     )));
+    let run = RunStart::now(&c.outputs);
     let st = scanflow::pipeline::merge(&c.work_dir, &c.mesh, ctx)?;
     signals::set_note(Some(format!("{} is complete", c.output.display())));
     report::merge(&st, &c.output);
+    let options = vec![(
+        "work directory".to_string(),
+        c.work_dir.display().to_string(),
+    )];
+    run.finish(
+        "merge",
+        ctx,
+        std::slice::from_ref(&c.work_dir),
+        None,
+        options,
+        &c.output,
+        serde_json::to_value(&st).unwrap_or_default(),
+        None,
+        st.preview.clone(),
+        Some(st.faces),
+        st.secs,
+    )?;
     if !c.keep_work {
         let left = workdir::remove_owned(&c.work_dir)?;
         if !left.is_empty() {

@@ -38,6 +38,7 @@ mod merge;
 mod paths;
 mod reconstruct;
 mod report;
+mod run_report;
 mod spectral;
 mod synth;
 

@@ -19,19 +19,41 @@ use scanflow::store::Store;
 
 use super::config::{Points, ReconstructConfig};
 use super::ingest::input_specs;
+use super::run_report::{RunStart, recon_options};
 use super::{paths, report, signals};
 
-/// Reconstruct and print the summary.
+/// Reconstruct and print the summary; write the picture and the report when asked.
 pub fn run(c: &ReconstructConfig, ctx: &Ctx) -> Result<()> {
     let t0 = std::time::Instant::now();
+    let run = RunStart::now(&c.outputs);
     let st = reconstruct(ctx, &c.points, &c.mesh, &c.params, c.keep_work)?;
     let secs = t0.elapsed().as_secs_f64();
+    let inputs = match &c.points {
+        Points::Store { dir, .. } => vec![dir.clone()],
+        Points::Files(inputs, _) => inputs.paths().iter().map(|p| p.to_path_buf()).collect(),
+    };
+    let outputs = || {
+        run.finish(
+            "reconstruct",
+            ctx,
+            &inputs,
+            Some(st.points),
+            recon_options(c),
+            &c.output,
+            serde_json::to_value(&st).unwrap_or_default(),
+            Some(st.leaf_map.clone()),
+            st.preview.clone(),
+            (!c.params.shard.is_split()).then_some(st.faces),
+            secs,
+        )
+    };
     if c.params.shard.is_split() {
         let work = workdir::resolve(&c.params.work_dir, &c.output)?;
         report::shard(&st, c.params.shard, &work, &c.output, secs);
-        return Ok(());
+        return outputs();
     }
     report::reconstruct(&st, &c.output, secs);
+    outputs()?;
     if let Some(job) = &c.hex {
         let st = scanflow::pipeline::hexmesh::hexmesh(job, ctx)?;
         super::hex::summary(&st, &job.output)?;

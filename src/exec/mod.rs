@@ -41,6 +41,54 @@ pub fn rss_bytes() -> u64 {
     proc_status_kib("VmRSS:") * 1024
 }
 
+/// The resident memory of this process over time, sampled by a thread from its start to
+/// [`MemoryTimeline::stop`]: for the run report's memory plot.
+///
+/// Samples start every [`MemoryTimeline::FIRST_EVERY`]; when [`MemoryTimeline::MOST`] are
+/// held, every other one is dropped and the interval doubles, so a night-long run keeps as
+/// few as a short one, evenly spread.
+pub struct MemoryTimeline {
+    stop: crossbeam_channel::Sender<()>,
+    thread: std::thread::JoinHandle<Vec<(f64, u64)>>,
+}
+
+impl MemoryTimeline {
+    /// The first interval between samples.
+    pub const FIRST_EVERY: std::time::Duration = std::time::Duration::from_millis(100);
+    /// The most samples held.
+    pub const MOST: usize = 1024;
+
+    /// Start sampling.
+    pub fn start() -> MemoryTimeline {
+        let (stop, rx) = crossbeam_channel::bounded::<()>(0);
+        let thread = std::thread::spawn(move || {
+            let t0 = std::time::Instant::now();
+            let mut every = Self::FIRST_EVERY;
+            let mut samples = vec![(0.0, rss_bytes())];
+            while let Err(crossbeam_channel::RecvTimeoutError::Timeout) = rx.recv_timeout(every) {
+                samples.push((t0.elapsed().as_secs_f64(), rss_bytes()));
+                if samples.len() >= Self::MOST {
+                    let mut k = 0;
+                    samples.retain(|_| {
+                        k += 1;
+                        k % 2 == 1
+                    });
+                    every *= 2;
+                }
+            }
+            samples.push((t0.elapsed().as_secs_f64(), rss_bytes()));
+            samples
+        });
+        MemoryTimeline { stop, thread }
+    }
+
+    /// Stop and return the samples: (seconds since the start, resident bytes).
+    pub fn stop(self) -> Vec<(f64, u64)> {
+        drop(self.stop);
+        self.thread.join().unwrap_or_default()
+    }
+}
+
 fn proc_status_kib(key: &str) -> u64 {
     let Ok(s) = std::fs::read_to_string("/proc/self/status") else {
         return 0;

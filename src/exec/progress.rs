@@ -1,11 +1,12 @@
 //! Progress: indicatif bars on a terminal, one JSON line per stage (and every few seconds)
 //! on stderr otherwise, so that cluster logs stay machine-readable.
 
-use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::time::{Duration, Instant};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant, SystemTime};
 
 use crossbeam_channel::{Sender, bounded};
+use serde::Serialize;
 
 /// Interval between a running stage's JSON lines (`--progress json`, and `auto` off a
 /// terminal): often enough to show a cluster job is alive, rare enough to keep logs short.
@@ -39,18 +40,50 @@ impl Mode {
     }
 }
 
+/// A finished stage, as the run report lists it.
+#[derive(Debug, Clone, Serialize)]
+pub struct StageRecord {
+    /// The stage's name (`ingest`, `leaves`, `tiles`, …).
+    pub name: String,
+    /// What it counted.
+    pub unit: String,
+    /// Units done.
+    pub done: u64,
+    /// Units expected, when known.
+    pub total: Option<u64>,
+    /// Seconds from its start to its end.
+    pub secs: f64,
+    /// Seconds from the reporter's creation to the stage's start.
+    pub start_secs: f64,
+    /// The process's peak resident memory at its end, in bytes.
+    pub peak_rss_bytes: u64,
+}
+
 /// The progress reporter of one command.
 #[derive(Debug, Clone)]
 pub struct Progress {
     mode: Mode,
     multi: Option<indicatif::MultiProgress>,
+    /// Every finished stage, in order of finishing.
+    records: Arc<Mutex<Vec<StageRecord>>>,
+    created: Instant,
 }
 
 impl Progress {
     /// A reporter in `mode`.
     pub fn new(mode: Mode) -> Progress {
         let multi = (mode == Mode::Bars).then(indicatif::MultiProgress::new);
-        Progress { mode, multi }
+        Progress {
+            mode,
+            multi,
+            records: Arc::default(),
+            created: Instant::now(),
+        }
+    }
+
+    /// The stages finished so far, in order of finishing.
+    pub fn records(&self) -> Vec<StageRecord> {
+        self.records.lock().map(|r| r.clone()).unwrap_or_default()
     }
 
     /// A reporter that shows nothing.
@@ -85,9 +118,15 @@ impl Progress {
                     None => indicatif::ProgressBar::new_spinner(),
                 };
                 let style = indicatif::ProgressStyle::with_template(&format!(
-                    "{{prefix:>8}} [{{bar:30}}] {{human_pos}}/{{human_len}} {unit} {{per_sec}} eta {{eta}}"
+                    "{{prefix:>8}} [{{bar:30}}] {{human_pos}}/{{human_len}} {unit} {{rate}} {{elapsed}} eta {{eta}}"
                 ))
                 .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
+                .with_key(
+                    "rate",
+                    |s: &indicatif::ProgressState, w: &mut dyn std::fmt::Write| {
+                        let _ = write!(w, "{}/s", indicatif::HumanCount(s.per_sec().round() as u64));
+                    },
+                )
                 .progress_chars("=> ");
                 b.set_style(style);
                 b.set_prefix(name.to_string());
@@ -125,6 +164,9 @@ impl Progress {
             bar,
             ticker,
             json: matches!(self.mode, Mode::Json { .. }),
+            records: Some(Arc::clone(&self.records)),
+            start_secs: self.created.elapsed().as_secs_f64(),
+            multi: self.multi.clone(),
         }
     }
 }
@@ -140,6 +182,10 @@ pub struct Stage {
     bar: Option<indicatif::ProgressBar>,
     ticker: Option<(Sender<()>, std::thread::JoinHandle<()>)>,
     json: bool,
+    /// Where the finished stage is recorded (taken when it is).
+    records: Option<Arc<Mutex<Vec<StageRecord>>>>,
+    start_secs: f64,
+    multi: Option<indicatif::MultiProgress>,
 }
 
 impl Stage {
@@ -177,8 +223,42 @@ impl Stage {
             drop(tx);
             let _ = h.join();
         }
+        let secs = self.start.elapsed().as_secs_f64();
+        // A finished bar gives way to one line: the stage, its count, time and rate.
         if let Some(b) = self.bar.take() {
-            b.finish();
+            b.finish_and_clear();
+            let done = self.done();
+            let line = format!(
+                "{:>8}  {} {} in {:.1} s ({}/s)",
+                self.name,
+                indicatif::HumanCount(done),
+                self.unit,
+                secs,
+                indicatif::HumanCount(if secs > 0.0 {
+                    (done as f64 / secs).round() as u64
+                } else {
+                    0
+                })
+            );
+            match &self.multi {
+                Some(m) => {
+                    let _ = m.println(line);
+                }
+                None => eprintln!("{line}"),
+            }
+        }
+        if let Some(r) = self.records.take()
+            && let Ok(mut r) = r.lock()
+        {
+            r.push(StageRecord {
+                name: self.name.clone(),
+                unit: self.unit.to_string(),
+                done: self.done(),
+                total: self.total,
+                secs,
+                start_secs: self.start_secs,
+                peak_rss_bytes: crate::exec::peak_rss_bytes(),
+            });
         }
     }
 }
@@ -200,6 +280,7 @@ fn emit(
 ) {
     let secs = start.elapsed().as_secs_f64();
     let mut v = serde_json::json!({
+        "time": timestamp(SystemTime::now()),
         "stage": name,
         "state": state,
         "done": done,
@@ -213,4 +294,46 @@ fn emit(
         o.extend(m);
     }
     eprintln!("{v}");
+}
+
+/// `t` as an ISO 8601 UTC timestamp with milliseconds: `2026-11-26T21:58:03.123Z`.
+pub fn timestamp(t: SystemTime) -> String {
+    let d = t
+        .duration_since(SystemTime::UNIX_EPOCH)
+        .unwrap_or(Duration::ZERO);
+    let secs = d.as_secs();
+    let (days, rem) = ((secs / 86_400) as i64, secs % 86_400);
+    // Civil date from days since 1970-01-01 (Howard Hinnant's algorithm).
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z.rem_euclid(146_097);
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let day = doy - (153 * mp + 2) / 5 + 1;
+    let month = if mp < 10 { mp + 3 } else { mp - 9 };
+    let year = yoe + era * 400 + i64::from(month <= 2);
+    format!(
+        "{year:04}-{month:02}-{day:02}T{:02}:{:02}:{:02}.{:03}Z",
+        rem / 3600,
+        rem / 60 % 60,
+        rem % 60,
+        d.subsec_millis()
+    )
+}
+
+#[cfg(test)]
+mod timestamp_tests {
+    use super::*;
+
+    #[test]
+    fn timestamps_are_utc_calendar_dates() {
+        let at = |s: u64, ms: u64| {
+            timestamp(SystemTime::UNIX_EPOCH + Duration::from_millis(s * 1000 + ms))
+        };
+        assert_eq!(at(0, 0), "1970-01-01T00:00:00.000Z");
+        assert_eq!(at(951_782_400, 5), "2000-02-29T00:00:00.005Z");
+        assert_eq!(at(1_795_729_083, 123), "2026-11-26T21:38:03.123Z");
+        assert_eq!(at(4_107_542_399, 999), "2100-02-28T23:59:59.999Z");
+    }
 }

@@ -228,7 +228,9 @@ impl VertexFormat {
 }
 
 /// Where and how a mesh is written: its path, its format (by extension,
-/// [`MeshFormat::for_path`]) and whether its vertices get normals (`--out-normals`).
+/// [`MeshFormat::for_path`]), whether its vertices get normals (`--out-normals`) and whether
+/// a picture of it is drawn as it streams ([`crate::io::preview`], of this many pixels a
+/// view's side).
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct MeshTarget {
     /// The output file.
@@ -237,6 +239,8 @@ pub struct MeshTarget {
     pub format: MeshFormat,
     /// Vertex normals.
     pub normals: bool,
+    /// A preview's side in pixels, when one is drawn.
+    pub preview: Option<usize>,
 }
 
 impl MeshTarget {
@@ -246,6 +250,7 @@ impl MeshTarget {
             path: path.to_path_buf(),
             format: MeshFormat::Ply,
             normals: false,
+            preview: None,
         }
     }
 }

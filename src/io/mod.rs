@@ -27,6 +27,8 @@
 //! * [`ply_write`]: point PLY ([`ply_write::PointPlyWriter`]);
 //! * [`mesh_write`]: the streamed mesh of ARCHITECTURE.md step 5, as PLY (binary or ASCII),
 //!   OBJ or STL ([`mesh_write::MeshWriter`]);
+//! * [`preview`]: a PNG picture of a mesh (three views), rasterised as the mesh streams to
+//!   its writer;
 //! * [`iges`]: tensor-product B-spline surfaces as IGES 5.3 entity 128
 //!   ([`iges::write_iges`]; whole files, small next to the points they were fitted to).
 //!
@@ -46,6 +48,7 @@ pub mod mmap;
 pub mod obj;
 pub mod ply;
 pub mod ply_write;
+pub mod preview;
 pub mod stl;
 pub mod volume;
 pub mod xyz;

@@ -19,9 +19,10 @@ use crate::error::{Error, Result};
 use crate::exec::Ctx;
 use crate::io::atomic::{self, Durability};
 use crate::io::mesh_write::MeshTarget;
+use crate::io::preview::Preview;
 use crate::recon::Plan;
 use crate::recon::checkpoint::{read_tile, tile_path};
-use crate::types::demorton3;
+use crate::types::{Aabb, demorton3};
 
 /// The description `merge` reads, in the work directory.
 pub const MERGE_FILE: &str = "merge.json";
@@ -47,6 +48,8 @@ pub struct MergeDescription {
     pub with_density: bool,
     /// The store reconstructed, which errors about the result name.
     pub input: PathBuf,
+    /// The input points' bounds (what a preview frames).
+    pub bounds: Aabb,
     /// The tiles that can hold surface, by Morton index, increasing.
     pub tiles: Vec<u64>,
 }
@@ -93,6 +96,9 @@ pub struct MergeStats {
     pub peak_frontier: usize,
     /// Wall time in seconds.
     pub secs: f64,
+    /// The picture of the mesh, when asked for.
+    #[serde(skip)]
+    pub preview: Option<Preview>,
 }
 
 /// Weld the tiles a split run left in `work` into the mesh `out`.
@@ -152,7 +158,7 @@ pub fn merge(work: &Path, out: &MeshTarget, ctx: &Ctx) -> Result<MergeStats> {
         intensity: d.with_intensity,
         density: d.with_density,
     };
-    let mut sink = MeshSink::create(&d.plan, attrs, out)?;
+    let mut sink = MeshSink::create(&d.plan, &d.bounds, attrs, out)?;
     let stage = ctx
         .progress
         .stage("merge", Some(d.tiles.len() as u64), "tiles");
@@ -168,12 +174,13 @@ pub fn merge(work: &Path, out: &MeshTarget, ctx: &Ctx) -> Result<MergeStats> {
         stage.inc(wave.len() as u64);
     }
     stage.finish(None);
-    let (vertices, faces, peak_frontier) = sink.finish(&d.input, d.iso, d.plan.depth)?;
+    let ts = sink.finish(&d.input, d.iso, d.plan.depth)?;
     Ok(MergeStats {
-        vertices,
-        faces,
+        vertices: ts.vertices,
+        faces: ts.faces,
         tiles: d.tiles.len(),
-        peak_frontier,
+        peak_frontier: ts.peak_frontier,
         secs: t0.elapsed().as_secs_f64(),
+        preview: ts.preview,
     })
 }

@@ -154,6 +154,53 @@ pub struct ReconStats {
     pub peak_frontier: usize,
     /// Wall time in seconds.
     pub secs: f64,
+    /// Input points.
+    pub points: u64,
+    /// Where the leaves are and which were refined, seen from above.
+    pub leaf_map: LeafMap,
+    /// The picture of the mesh, when asked for.
+    #[serde(skip)]
+    pub preview: Option<crate::io::preview::Preview>,
+}
+
+/// The leaves seen from above (along −z): per column `(x, y)` of the leaf grid, how many
+/// leaves hold points and how many of them were refined by a fine solve, for the run
+/// report's map.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct LeafMap {
+    /// Leaves per axis.
+    pub n: u32,
+    /// Leaves holding points per column, row-major in y then x (`n × n`).
+    pub occupied: Vec<u32>,
+    /// Refined leaves per column.
+    pub refined: Vec<u32>,
+}
+
+impl LeafMap {
+    /// The map of `all` leaves, `refined` among them.
+    fn new(all: &[CellKey], refined: &BTreeSet<CellKey>) -> LeafMap {
+        let Some(level) = all.first().map(|k| k.level()) else {
+            return LeafMap::default();
+        };
+        let n = 1u32 << level;
+        let mut map = LeafMap {
+            n,
+            occupied: vec![0; (n * n) as usize],
+            refined: vec![0; (n * n) as usize],
+        };
+        for k in all {
+            let (l, c) = k.decode();
+            if l != level {
+                continue;
+            }
+            let i = (c[1] * n + c[0]) as usize;
+            map.occupied[i] += 1;
+            if refined.contains(k) {
+                map.refined[i] += 1;
+            }
+        }
+        map
+    }
 }
 
 /// Reconstruct the surface of the points in `store` into the mesh `out`; a split run
@@ -201,6 +248,7 @@ pub fn reconstruct(
         with_color,
         with_intensity,
         input: &store.dir,
+        bounds: m.bounds,
     };
     let nonempty = tiles::nonempty_tiles(&job);
     let split = params.shard.is_split();
@@ -215,6 +263,7 @@ pub fn reconstruct(
                 with_intensity,
                 with_density: params.density,
                 input: store.dir.clone(),
+                bounds: m.bounds,
                 tiles: nonempty.clone(),
             },
         )?;
@@ -239,6 +288,9 @@ pub fn reconstruct(
         tile_voxels: plan.tile,
         peak_frontier: ts.peak_frontier,
         secs: t0.elapsed().as_secs_f64(),
+        points: m.point_count,
+        leaf_map: LeafMap::new(&leaves.all, &leaves.refined),
+        preview: ts.preview,
     })
 }
 

@@ -21,10 +21,11 @@ use crate::extract::field::BlendEval;
 use crate::extract::gpu::GpuExtractor;
 use crate::extract::weld::Welder;
 use crate::io::mesh_write::{MeshTarget, MeshWriter, VertexFormat};
+use crate::io::preview::Preview;
 use crate::recon::checkpoint::{read_tile, tile_path, write_tile};
 use crate::recon::{CoarseField, Plan, leaves_near, pou, tile_blend};
 use crate::surface::{NearPoints, Support, settle, trim_by_density, trim_mesh};
-use crate::types::{CellKey, Detail, EdgeKey, GridGeom, TileMesh, demorton3, morton3};
+use crate::types::{Aabb, CellKey, Detail, EdgeKey, GridGeom, TileMesh, demorton3, morton3};
 
 /// Bytes a tile node holds while its field is built: the blend's i64 accumulator (8) and the
 /// f32 field (4).
@@ -57,6 +58,8 @@ pub struct TileJob<'a> {
     pub unit: f32,
     /// Leaf checkpoints.
     pub leaves_dir: &'a Path,
+    /// The input points' bounds (what a preview frames).
+    pub bounds: Aabb,
     /// Tile checkpoints.
     pub tiles_dir: &'a Path,
     /// The shards' claims (a split run).
@@ -70,7 +73,7 @@ pub struct TileJob<'a> {
 }
 
 /// What the tiles phase did.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 pub struct TileStats {
     /// Output vertices.
     pub vertices: u64,
@@ -80,6 +83,8 @@ pub struct TileStats {
     pub tiles: usize,
     /// Most vertices held in the welder's frontier at once.
     pub peak_frontier: usize,
+    /// The picture of the mesh, when asked for.
+    pub preview: Option<Preview>,
 }
 
 /// A tile of a wave: its Morton index, lowest fine node and the refined leaves that reach it.
@@ -119,6 +124,7 @@ pub fn run(
     let mut sink = match out {
         Some(out) => Some(MeshSink::create(
             plan,
+            &job.bounds,
             VertexAttrs {
                 color: job.with_color,
                 intensity: job.with_intensity,
@@ -200,15 +206,18 @@ pub fn run(
     if gpu.is_some() {
         gpu_totals.log();
     }
-    let (vertices, faces, peak_frontier) = match sink {
-        Some(sink) => sink.finish(job.input, job.iso, job.params.depth)?,
-        None => (0, 0, 0),
-    };
-    Ok(TileStats {
-        vertices,
-        faces,
-        tiles: tiles_done,
-        peak_frontier,
+    Ok(match sink {
+        Some(sink) => TileStats {
+            tiles: tiles_done,
+            ..sink.finish(job.input, job.iso, job.params.depth)?
+        },
+        None => TileStats {
+            vertices: 0,
+            faces: 0,
+            tiles: tiles_done,
+            peak_frontier: 0,
+            preview: None,
+        },
     })
 }
 
@@ -257,6 +266,8 @@ pub(super) struct MeshSink {
     spacing: f64,
     /// Vertex normals being summed, with `--out-normals`.
     normals: Option<NormalSums>,
+    /// The picture being drawn, with `--preview` or `--report`.
+    preview: Option<Preview>,
 }
 
 /// The area-weighted normals of the vertices whose triangles are not all welded yet.
@@ -351,7 +362,12 @@ impl NormalSums {
 
 impl MeshSink {
     /// A sink writing `out` for tiles of `plan`, its vertices carrying `attrs`.
-    pub(super) fn create(plan: &Plan, attrs: VertexAttrs, out: &MeshTarget) -> Result<MeshSink> {
+    pub(super) fn create(
+        plan: &Plan,
+        bounds: &Aabb,
+        attrs: VertexAttrs,
+        out: &MeshTarget,
+    ) -> Result<MeshSink> {
         // Vertices are written in float32 only where it keeps the input's resolution
         // (georeferenced coordinates get float64; see `io::mesh_write`).
         let format = VertexFormat {
@@ -377,6 +393,7 @@ impl MeshSink {
             ntiles_axis: plan.fine_cells / plan.tile,
             spacing: plan.spacing,
             normals: out.normals.then(NormalSums::default),
+            preview: out.preview.map(|side| Preview::new(bounds, side)),
         })
     }
 
@@ -415,12 +432,22 @@ impl MeshSink {
                 &mut self.writer.borrow_mut(),
             )?;
         }
+        if let Some(pv) = self.preview.as_mut() {
+            let world = |i: u32| {
+                let p = mesh.positions[i as usize];
+                [0, 1, 2].map(|d| p[d] + origin[d])
+            };
+            for t in &mesh.triangles {
+                let colors = (!mesh.colors.is_empty()).then(|| t.map(|i| mesh.colors[i as usize]));
+                pv.triangle(t.map(world), colors);
+            }
+        }
         Ok(())
     }
 
     /// Complete the mesh: vertices, faces and the welder's largest frontier. A mesh without a
     /// triangle is an error naming `input` (nothing appears under the output's name).
-    pub(super) fn finish(self, input: &Path, iso: f64, depth: u32) -> Result<(u64, u64, usize)> {
+    pub(super) fn finish(self, input: &Path, iso: f64, depth: u32) -> Result<TileStats> {
         let mut writer = self.writer.into_inner();
         if let Some(mut sums) = self.normals {
             sums.release(None, &mut writer)?;
@@ -436,7 +463,13 @@ impl MeshSink {
             ));
         }
         let ws = writer.finish()?;
-        Ok((ws.vertices, ws.faces, self.welder.peak_frontier()))
+        Ok(TileStats {
+            vertices: ws.vertices,
+            faces: ws.faces,
+            tiles: 0,
+            peak_frontier: self.welder.peak_frontier(),
+            preview: self.preview,
+        })
     }
 }
 
