@@ -224,6 +224,28 @@ pub enum Cmd {
     Hexmesh(HexmeshArgs),
     /// Quality of a hexahedral mesh (Verdict's measures); exit 1 when a hexahedron is inverted.
     Hexcheck(HexcheckArgs),
+    /// Print a shell completion script on stdout: `scanflow completions bash >
+    /// ~/.local/share/bash-completion/completions/scanflow`.
+    Completions(CompletionsArgs),
+    /// Write the man pages (scanflow.1 and one per command, scanflow-reconstruct.1, …) into a
+    /// directory: `scanflow man -o ~/.local/share/man/man1`.
+    Man(ManArgs),
+}
+
+/// `scanflow completions`.
+#[derive(Args, Debug)]
+pub struct CompletionsArgs {
+    /// The shell.
+    #[arg(value_enum)]
+    pub shell: clap_complete::Shell,
+}
+
+/// `scanflow man`.
+#[derive(Args, Debug)]
+pub struct ManArgs {
+    /// Directory for the pages (made if missing; its parent must exist).
+    #[arg(short, long)]
+    pub output: PathBuf,
 }
 
 /// `scanflow hexmesh`.

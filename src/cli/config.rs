@@ -17,8 +17,8 @@ use scanflow::recon::{DEPTHS, PointWeight};
 use scanflow::synth::{BUMPY_RELIEF, Shape};
 
 use super::args::{
-    CheckArgs, Cli, Cmd, Common, DemoArgs, HexcheckArgs, HexmeshArgs, InfoArgs, IngestArgs,
-    MergeArgs, MeshOutOpts, NormalOpts, ReconstructArgs, SynthArgs,
+    CheckArgs, Cli, Cmd, Common, CompletionsArgs, DemoArgs, HexcheckArgs, HexmeshArgs, InfoArgs,
+    IngestArgs, ManArgs, MergeArgs, MeshOutOpts, NormalOpts, ReconstructArgs, SynthArgs,
 };
 pub use super::fit::FitConfig;
 use super::paths;
@@ -72,6 +72,10 @@ pub enum Config {
     Fit(FitConfig),
     /// `merge`.
     Merge(MergeConfig),
+    /// `completions`.
+    Completions(CompletionsArgs),
+    /// `man`.
+    Man(ManArgs),
 }
 
 impl Config {
@@ -91,6 +95,20 @@ impl Config {
             Cmd::Spectrum(a) => Config::Spectral(SpectralConfig::spectrum(a)?),
             Cmd::Fit(a) => Config::Fit(FitConfig::new(a)?),
             Cmd::Merge(a) => Config::Merge(MergeConfig::new(a)?),
+            Cmd::Completions(a) => Config::Completions(a),
+            Cmd::Man(a) => {
+                if a.output.exists() && !a.output.is_dir() {
+                    bail!("-o {}: exists and is not a directory", a.output.display());
+                }
+                if !paths::parent(&a.output).is_dir() {
+                    bail!(
+                        "-o {}: directory {} does not exist",
+                        a.output.display(),
+                        paths::parent(&a.output).display()
+                    );
+                }
+                Config::Man(a)
+            }
         })
     }
 }

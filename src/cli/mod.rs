@@ -29,6 +29,7 @@ pub mod signals;
 
 mod check;
 mod demo;
+mod docs;
 mod fit;
 mod fit_tiles;
 mod hex;
@@ -62,6 +63,8 @@ pub fn run(config: Config) -> Result<()> {
         Config::Merge(c) => merge::run(&c, &start(&c.run)?),
         Config::Hexmesh(c) => hex::run(&c, &start(&c.run)?),
         Config::Hexcheck(a) => hex::check(&a),
+        Config::Completions(a) => docs::completions(&a),
+        Config::Man(a) => docs::man(&a),
     }
 }
 

@@ -128,3 +128,156 @@ fn help_states_the_code_s_defaults() {
         "{help}"
     );
 }
+
+/// The long options in `text`: `--name` tokens.
+fn long_options(text: &str) -> std::collections::BTreeSet<String> {
+    let mut out = std::collections::BTreeSet::new();
+    let b = text.as_bytes();
+    let mut i = 0;
+    while i + 2 < b.len() {
+        let starts =
+            b[i] == b'-' && b[i + 1] == b'-' && (i == 0 || !b[i - 1].is_ascii_alphanumeric());
+        if starts && b[i + 2].is_ascii_alphabetic() {
+            let mut j = i + 2;
+            while j < b.len() && (b[j].is_ascii_alphanumeric() || b[j] == b'-') {
+                j += 1;
+            }
+            out.insert(String::from_utf8_lossy(&b[i..j]).into_owned());
+            i = j;
+        } else {
+            i += 1;
+        }
+    }
+    out
+}
+
+/// The long options a `--help` page defines: the first `--name` of each line that starts
+/// with `--name` or `-x, --name`.
+fn defined_options(help: &str) -> std::collections::BTreeSet<String> {
+    help.lines()
+        .filter_map(|l| {
+            let t = l.trim_start();
+            let t = match t.as_bytes() {
+                [b'-', b'-', ..] => t,
+                [b'-', c, b',', b' ', ..] if c.is_ascii_alphanumeric() => &t[4..],
+                _ => return None,
+            };
+            long_options(t).into_iter().next()
+        })
+        .collect()
+}
+
+/// The README's command synopsis names every option each command takes and no other: each
+/// command's lines are checked against its `--help` (the options every command takes are
+/// stated once below the synopsis; `[SPECTRAL OPTIONS]` is spelled out under the spectral
+/// commands; `-o` is `--output`).
+#[test]
+fn the_readme_synopsis_matches_every_command_help() {
+    let readme =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/README.md")).unwrap();
+    let block = readme
+        .split("## Commands\n\n```sh\n")
+        .nth(1)
+        .and_then(|r| r.split("\n```").next())
+        .expect("the README's command synopsis");
+    let mut entries: Vec<(String, String)> = Vec::new();
+    for line in block.lines() {
+        match line.strip_prefix("scanflow ") {
+            Some(rest) => {
+                let cmd = rest.split_whitespace().next().unwrap().to_string();
+                entries.push((cmd, rest.to_string()));
+            }
+            None => entries
+                .last_mut()
+                .expect("a command first")
+                .1
+                .push_str(line),
+        }
+    }
+    let synopsis: std::collections::BTreeMap<String, String> = entries.into_iter().collect();
+    let spectral = block
+        .split("SPECTRAL OPTIONS:")
+        .nth(1)
+        .map(|r| r.split("\nscanflow ").next().unwrap_or(""))
+        .expect("SPECTRAL OPTIONS spelled out");
+    let common: std::collections::BTreeSet<String> =
+        ["--threads", "--mem", "--progress", "--help", "--version"]
+            .iter()
+            .map(|s| s.to_string())
+            .collect();
+    let help_out = run(&["--help"]);
+    let help = String::from_utf8_lossy(&help_out.stdout);
+    let commands: Vec<String> = help
+        .split("Commands:\n")
+        .nth(1)
+        .unwrap()
+        .split("\n\n")
+        .next()
+        .unwrap()
+        .lines()
+        .filter_map(|l| l.split_whitespace().next())
+        .filter(|c| *c != "help")
+        .map(str::to_string)
+        .collect();
+    assert!(commands.len() > 10, "{commands:?}");
+    let mut wrong = Vec::new();
+    for cmd in &commands {
+        let Some(text) = synopsis.get(cmd) else {
+            wrong.push(format!("{cmd}: not in the README's synopsis"));
+            continue;
+        };
+        let mut listed = long_options(text);
+        if text.contains("[SPECTRAL OPTIONS]") {
+            listed.extend(long_options(spectral));
+        }
+        if text.contains("-o ") {
+            listed.insert("--output".to_string());
+        }
+        let o = run(&[cmd, "--help"]);
+        let options: std::collections::BTreeSet<String> =
+            defined_options(&String::from_utf8_lossy(&o.stdout))
+                .difference(&common)
+                .cloned()
+                .collect();
+        for missing in options.difference(&listed) {
+            wrong.push(format!("{cmd}: {missing} is not in the README's synopsis"));
+        }
+        for extra in listed.difference(&options) {
+            if !(cmd == "reconstruct" && extra == "--pointWeight") {
+                wrong.push(format!(
+                    "{cmd}: the README lists {extra}, which --help does not"
+                ));
+            }
+        }
+    }
+    assert!(wrong.is_empty(), "{}", wrong.join("\n"));
+}
+
+/// Shell completions and man pages come from the clap definitions.
+#[test]
+fn completions_and_man_pages_name_the_options() {
+    let bash = ok(&["completions", "bash"]);
+    assert!(
+        bash.contains("_scanflow()") && bash.contains("--out-normals"),
+        "{bash:.200}"
+    );
+    let fish = ok(&["completions", "fish"]);
+    assert!(fish.contains("complete -c scanflow"), "{fish:.200}");
+    let dir = tempfile::tempdir().unwrap();
+    let man = dir.path().join("man1");
+    ok(&["man", "-o", man.to_str().unwrap()]);
+    let page = std::fs::read_to_string(man.join("scanflow-reconstruct.1")).unwrap();
+    assert!(
+        page.starts_with(".ie") || page.contains(".TH"),
+        "{page:.200}"
+    );
+    assert!(page.contains("out\\-normals"), "{page:.400}");
+    assert!(man.join("scanflow.1").exists());
+    let file = dir.path().join("f");
+    std::fs::write(&file, "").unwrap();
+    let e = usage(&["man", "-o", file.to_str().unwrap()]);
+    assert!(e.contains("not a directory"), "{e}");
+    let o = run(&["completions", "tcsh"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("possible values"));
+}
