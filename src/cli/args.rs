@@ -337,7 +337,7 @@ pub enum RefineChoice {
 /// `scanflow fit`.
 #[derive(Args, Debug)]
 pub struct FitArgs {
-    /// Point files (PLY, LAS/LAZ, XYZ/PTS), or one store directory made by `ingest` (--tiles).
+    /// Point files (PLY, LAS/LAZ, E57, XYZ/PTS), or one store directory made by `ingest` (--tiles).
     pub inputs: Vec<PathBuf>,
     /// Output IGES file (.igs or .iges).
     #[arg(short, long)]
@@ -528,7 +528,7 @@ pub struct SynthArgs {
 /// `scanflow ingest`.
 #[derive(Args, Debug)]
 pub struct IngestArgs {
-    /// Point files (PLY, LAS/LAZ, XYZ/PTS).
+    /// Point files (PLY, LAS/LAZ, E57, XYZ/PTS).
     pub inputs: Vec<PathBuf>,
     /// Output store directory (must not exist).
     #[arg(short, long)]

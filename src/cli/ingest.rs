@@ -25,22 +25,42 @@ pub fn input_specs(inputs: &Inputs) -> Result<Vec<InputSpec>> {
         specs.extend(scanflow::io::conf::read_conf(c)?);
     }
     let from_conf = specs.len();
-    specs.extend(inputs.files.iter().map(InputSpec::plain));
+    // An E57 file is one input per scan, each seen from its scanner's position.
+    let mut e57_scans = Vec::new();
+    for f in &inputs.files {
+        if is_e57(f) {
+            let scans = scanflow::io::e57::scan_inputs(f)?;
+            e57_scans.push(scans.len());
+            specs.extend(scans);
+        } else {
+            e57_scans.push(0);
+            specs.push(InputSpec::plain(f));
+        }
+    }
     if specs.is_empty() {
         bail!("no input: give point files, a store, or --conf FILE");
     }
-    let files = &mut specs[from_conf..];
-    match inputs.viewpoints.as_slice() {
-        [] => {}
-        [one] => files
-            .iter_mut()
-            .for_each(|s| s.viewpoint = Some(Viewpoint::Point(*one))),
-        each => {
-            // `Inputs` holds one per file here.
-            for (s, p) in files.iter_mut().zip(each) {
+    // --viewpoint: once for every input, or once per file (an E57 file's scans share it).
+    let per_file: Vec<Option<[f64; 3]>> = match inputs.viewpoints.as_slice() {
+        [] => vec![None; inputs.files.len()],
+        [one] => vec![Some(*one); inputs.files.len()],
+        // `Inputs` holds one per file here.
+        each => each.iter().copied().map(Some).collect(),
+    };
+    let mut at = from_conf;
+    for (vp, scans) in per_file.iter().zip(&e57_scans) {
+        for s in &mut specs[at..at + (*scans).max(1)] {
+            if let Some(p) = vp {
                 s.viewpoint = Some(Viewpoint::Point(*p));
             }
         }
+        at += (*scans).max(1);
     }
     Ok(specs)
+}
+
+/// An E57 file, by its extension.
+fn is_e57(path: &std::path::Path) -> bool {
+    path.extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("e57"))
 }

@@ -81,6 +81,7 @@ pub fn read_conf(path: &Path) -> Result<Vec<InputSpec>> {
                     path: file,
                     transform,
                     viewpoint: Some(Viewpoint::Direction(transform.rotate([0.0, 0.0, 1.0]))),
+                    scan: None,
                 });
             }
             Some(other) => {

@@ -14,6 +14,7 @@
 //!
 //! * [`ply`]: PLY points, ascii and binary (`header.rs` the header, `decode.rs` the records);
 //! * [`las`]: LAS and LAZ;
+//! * [`e57`]: E57, every scan with its pose (one input per scan for ingest);
 //! * [`xyz`]: XYZ / PTS text (`text.rs` the layouts, tokenizer and line walk, `decode.rs` the
 //!   values);
 //! * [`mesh_read`]: PLY meshes, vertices through [`ply`] and the `face` element (`faces.rs`)
@@ -39,6 +40,7 @@
 
 pub mod atomic;
 pub mod conf;
+pub mod e57;
 pub mod iges;
 pub mod las;
 pub mod las_meta;
@@ -75,6 +77,8 @@ pub enum Format {
     Laz,
     /// Whitespace-separated text, one point a line.
     Xyz,
+    /// ASTM E57 (terrestrial scans with their poses).
+    E57,
 }
 
 impl Format {
@@ -87,6 +91,7 @@ impl Format {
             Format::Las => "LAS",
             Format::Laz => "LAZ",
             Format::Xyz => "XYZ text",
+            Format::E57 => "E57",
         }
     }
 
@@ -184,6 +189,8 @@ pub struct InputSpec {
     pub transform: Rigid,
     /// Where the scan was seen from, in the common frame, when known.
     pub viewpoint: Option<Viewpoint>,
+    /// The one scan of a multi-scan file (E57) this input reads; `None`: every scan.
+    pub scan: Option<usize>,
 }
 
 impl InputSpec {
@@ -193,7 +200,16 @@ impl InputSpec {
             path: path.into(),
             transform: Rigid::IDENTITY,
             viewpoint: None,
+            scan: None,
         }
+    }
+}
+
+/// Open input `spec`: its file ([`open`]), or the one scan of an E57 file it names.
+pub fn open_input(spec: &InputSpec) -> Result<Box<dyn PointReader>> {
+    match spec.scan {
+        Some(i) => Ok(Box::new(e57::E57Reader::open(&spec.path, Some(i))?)),
+        None => open(&spec.path),
     }
 }
 
@@ -219,6 +235,9 @@ pub fn open(path: &Path) -> Result<Box<dyn PointReader>> {
     if &magic == b"LASF" {
         return Ok(Box::new(las::LasReader::open(path)?));
     }
+    if &magic == b"ASTM" {
+        return Ok(Box::new(e57::E57Reader::open(path, None)?));
+    }
     let ext = path
         .extension()
         .and_then(|e| e.to_str())
@@ -236,9 +255,14 @@ pub fn open(path: &Path) -> Result<Box<dyn PointReader>> {
             Location::Byte(0),
             "not a LAS file: it does not start with the signature \"LASF\"",
         )),
+        "e57" => Err(Error::format(
+            path,
+            Location::Byte(0),
+            "not an E57 file: it does not start with the signature \"ASTM-E57\"",
+        )),
         _ => Err(Error::input(
             path,
-            "unknown point format: expected a PLY or LAS/LAZ file, or text with extension .xyz, .pts or .txt",
+            "unknown point format: expected a PLY, LAS/LAZ or E57 file, or text with extension .xyz, .pts or .txt",
         )),
     }
 }

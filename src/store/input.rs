@@ -23,7 +23,7 @@ pub fn open_inputs(inputs: &[InputSpec]) -> Result<Vec<Box<dyn PointReader>>> {
     if inputs.is_empty() {
         return Err(Error::Usage("no input files given".into()));
     }
-    inputs.iter().map(|i| crate::io::open(&i.path)).collect()
+    inputs.iter().map(crate::io::open_input).collect()
 }
 
 /// The inputs of one ingest, opened, with what the store makes of them.

@@ -145,6 +145,7 @@ fn bunny_scans_align_through_conf() {
                     translation: s.transform.translation,
                 },
                 viewpoint: s.viewpoint,
+                scan: None,
             }
         })
         .collect();

@@ -464,3 +464,67 @@ fn the_preview_shows_the_shape_and_the_report_renders() {
         .count();
     assert!(grey > 10_000, "the screenshot shows {grey} surface pixels");
 }
+
+/// An E57 file written by an independent tool (pye57, libE57Format) with six scans of a
+/// sphere, each in its own frame with its pose, colour and intensity: ingested as one input
+/// per scan with the scanner's position as its viewpoint, the poses put the points back on
+/// the sphere, the estimated normals face out (positive volume), and the colours reach the
+/// mesh.
+#[test]
+fn an_e57_of_six_posed_scans_reconstructs_the_sphere() {
+    if !python_has("numpy, plyfile, pye57", "e57") {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let pts = d.join("sphere.ply");
+    ok(&["synth", "sphere", "--points", "20000", "-o", s(&pts)]);
+    let e57 = d.join("six.e57");
+    let script = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/e57_scans.py");
+    let o = Command::new("python3")
+        .arg(script)
+        .arg(&pts)
+        .arg(&e57)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(String::from_utf8_lossy(&o.stdout).trim(), "6 20000");
+    let info = ok(&["info", s(&e57)]);
+    assert!(info.contains("E57") && info.contains("20000"), "{info}");
+    assert!(info.contains("red green blue intensity"), "{info}");
+    let mesh = d.join("m.ply");
+    recon(&e57, &mesh, &[]);
+    let truth = d.join("sphere.truth.json");
+    let rep = ok(&["check", s(&mesh), "--truth", s(&truth), "--json"]);
+    let v: serde_json::Value = serde_json::from_str(&rep).unwrap();
+    assert_eq!(v["check"]["watertight"], true, "{rep}");
+    let mean = v["comparison"]["absolute"]["to_reference"]["mean"]
+        .as_f64()
+        .unwrap();
+    assert!(mean < 5e-4, "mean distance {mean}");
+    let m = scanflow::io::mesh_read::read_mesh(&mesh).unwrap();
+    let volume: f64 = m
+        .triangles
+        .iter()
+        .map(|t| {
+            let [a, b, c] = t.map(|i| m.vertices[i as usize]);
+            (a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0])
+                + a[2] * (b[0] * c[1] - b[1] * c[0]))
+                / 6.0
+        })
+        .sum();
+    let sphere = 4.0 / 3.0 * std::f64::consts::PI;
+    assert!((volume / sphere - 1.0).abs() < 0.01, "volume {volume}");
+    let head = std::fs::read(&mesh).unwrap();
+    let head = String::from_utf8_lossy(&head[..700]);
+    assert!(
+        head.contains("property uchar red") && head.contains("scalar_intensity"),
+        "{head}"
+    );
+    // A broken E57 is named.
+    let broken = d.join("broken.e57");
+    let bytes = std::fs::read(&e57).unwrap();
+    std::fs::write(&broken, &bytes[..bytes.len() / 2]).unwrap();
+    let e = super::common::fails(&["info", s(&broken)]);
+    assert!(e.contains("broken.e57"), "{e}");
+}
