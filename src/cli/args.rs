@@ -571,6 +571,11 @@ pub struct ReconstructArgs {
     /// CloudCompare), to trim by after the fact as with PoissonRecon's --density.
     #[arg(long)]
     pub density: bool,
+    /// Weigh each sample's normal by its confidence (the PLY's `confidence` property, clamped
+    /// to [0, 1]), as PoissonRecon's --confidence: less trusted samples pull the surface less
+    /// where better ones overlap them.
+    #[arg(long)]
+    pub confidence: bool,
     /// Drop the triangles whose corners' mean sampling density (input points per square
     /// unit, as --density writes it) is below D: trimming by a threshold.
     #[arg(long, value_name = "D", allow_negative_numbers = true)]

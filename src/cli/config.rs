@@ -473,6 +473,7 @@ impl ReconstructConfig {
         params.fit = !a.no_fit;
         params.gpu = a.gpu.into();
         params.density = a.density;
+        params.confidence = a.confidence;
         params.trim_density = a.trim_density;
         let hex = match a.hex {
             Some(h) => {
@@ -503,6 +504,19 @@ impl ReconstructConfig {
             None => None,
         };
         let points = Points::new(a.inputs, a.conf, &a.normal)?;
+        if a.confidence
+            && let Points::Files(inputs, _) = &points
+        {
+            // Headers only: refused before any work.
+            for f in &inputs.files {
+                if !scanflow::io::open(f)?.attributes().confidence {
+                    bail!(
+                        "--confidence: {} carries no confidence (a PLY vertex property \"confidence\"), so there is nothing to weigh its points by",
+                        f.display()
+                    );
+                }
+            }
+        }
         if let Some(text) = &a.shard {
             if let Some(p) = &a.mesh.preview {
                 bail!(

@@ -145,6 +145,7 @@ pub fn recon_options(c: &ReconstructConfig) -> Vec<(String, String)> {
         ("--trim", p.trim.to_string()),
         ("--no-fit", (!p.fit).to_string()),
         ("--density", p.density.to_string()),
+        ("--confidence", p.confidence.to_string()),
         (
             "--trim-density",
             p.trim_density.map_or("none".to_string(), |d| d.to_string()),

@@ -155,6 +155,10 @@ impl<'a> PointSource<'a> {
 
     fn load(&self, i: usize) -> Result<SortedCell> {
         let b = self.store.read_cell(i)?;
+        let mut b = b;
+        if self.plan.confidence {
+            super::reconstruct::weigh_by_confidence(&mut b);
+        }
         Ok(SortedCell::new(b, &self.plan.cube, self.plan.leaf_level))
     }
 

@@ -72,6 +72,8 @@ pub struct ReconParams {
     /// Drop the triangles whose corners' mean sampling density is below this (input points
     /// per square unit): PoissonRecon's trimming by density, as a threshold.
     pub trim_density: Option<f64>,
+    /// Weigh each sample's normal by its confidence ([`weigh_by_confidence`]).
+    pub confidence: bool,
     /// Tile fields and marching cubes on the GPU: auto (a real GPU when there is one), on,
     /// off (the default: the GPU path is not yet measured faster end to end, see
     /// `extract::gpu`).
@@ -105,6 +107,7 @@ impl ReconParams {
             trim: false,
             density: false,
             trim_density: None,
+            confidence: false,
             gpu: crate::extract::gpu::GpuMode::Off,
             shard: Shard::ALL,
         }
@@ -294,6 +297,25 @@ pub fn reconstruct(
     })
 }
 
+/// Scale each point's normal by its confidence (clamped to [0, 1]): the normal field is a
+/// confidence-weighted density of the samples' normals, as with PoissonRecon's
+/// `--confidence`, so samples a scanner trusts less (grazing angles, far ranges) pull the
+/// surface less where better ones overlap them. The screening term and the iso-value keep
+/// unit weights. A batch without confidences is left as it is.
+pub fn weigh_by_confidence(b: &mut PointBatch) {
+    if b.confidence.len() != b.normal.len() {
+        return;
+    }
+    for (n, &c) in b.normal.iter_mut().zip(&b.confidence) {
+        let w = if c.is_finite() {
+            c.clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        *n = n.map(|x| x * w);
+    }
+}
+
 /// Check that `store` can be reconstructed and choose the grids.
 fn plan_run(store: &Store, params: &ReconParams, ctx: &Ctx) -> Result<Plan> {
     let m = &store.manifest;
@@ -312,7 +334,13 @@ fn plan_run(store: &Store, params: &ReconParams, ctx: &Ctx) -> Result<Plan> {
             ),
         ));
     }
-    Plan::new(
+    if params.confidence && !m.attributes.confidence {
+        return Err(Error::input(
+            &store.dir,
+            "--confidence: the points carry no confidence (a PLY vertex property \"confidence\"), so there is nothing to weigh them by",
+        ));
+    }
+    let mut plan = Plan::new(
         m.cube,
         params.depth,
         params.sigma_vox,
@@ -321,7 +349,9 @@ fn plan_run(store: &Store, params: &ReconParams, ctx: &Ctx) -> Result<Plan> {
         params.point_weight.alpha(None),
         params.tile_voxels,
         plan_budget(ctx.budget.total()),
-    )
+    )?;
+    plan.confidence = params.confidence;
+    Ok(plan)
 }
 
 /// What a budget of `total` bytes gives the grids ([`Share`]): the coarse solve's scratch its
@@ -417,8 +447,11 @@ fn coarse_pass(store: &Store, plan: &Plan, weight: PointWeight, ctx: &Ctx) -> Re
         let batches: Vec<Result<(PointBatch, NoiseStats)>> = ctx.pool.install(|| {
             ids.par_iter()
                 .map(|&j| {
-                    let b = store.read_cell(j)?;
+                    let mut b = store.read_cell(j)?;
                     let st = NoiseStats::of(&b.pos, &b.normal, plan.cube.origin, plan.spacing);
+                    if plan.confidence {
+                        weigh_by_confidence(&mut b);
+                    }
                     Ok((b, st))
                 })
                 .collect()

@@ -133,6 +133,7 @@ impl RunIdentity {
             ("--trim", params.trim.to_string()),
             ("--no-fit", (!params.fit).to_string()),
             ("--density", params.density.to_string()),
+            ("--confidence", params.confidence.to_string()),
             (
                 "--trim-density",
                 params

@@ -115,6 +115,9 @@ pub struct Plan {
     /// two samples).
     #[serde(default)]
     pub noise_voxels: Option<f64>,
+    /// Samples' normals are weighed by their confidence (`--confidence`).
+    #[serde(default)]
+    pub confidence: bool,
 }
 
 impl Plan {
@@ -167,6 +170,7 @@ impl Plan {
             sigma_vox,
             point_weight,
             noise_voxels: None,
+            confidence: false,
         })
     }
 
