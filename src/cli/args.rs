@@ -607,6 +607,17 @@ pub struct ReconstructArgs {
     /// Refine only leaves holding at least this many points.
     #[arg(long, default_value_t = scanflow::recon::DEFAULT_MIN_POINTS)]
     pub min_points: u64,
+    /// Refine a leaf only where its points average at least S per fine voxel of the surface
+    /// crossing it (S·E² points in a leaf of E voxels a side), as PoissonRecon's
+    /// --samplesPerNode (also accepted; it suggests 1 to 5 for clean data, 15 to 20 for noisy):
+    /// sparse parts keep the coarse solve's smoother surface.
+    #[arg(
+        long,
+        alias = "samplesPerNode",
+        value_name = "S",
+        allow_negative_numbers = true
+    )]
+    pub samples_per_node: Option<f64>,
     /// Leave the surface open where no input point supports it.
     #[arg(long)]
     pub trim: bool,

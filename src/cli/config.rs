@@ -474,6 +474,12 @@ impl ReconstructConfig {
         params.gpu = a.gpu.into();
         params.density = a.density;
         params.confidence = a.confidence;
+        if let Some(sp) = a.samples_per_node
+            && !(sp > 0.0 && sp.is_finite())
+        {
+            bail!("--samples-per-node {sp}: expected a positive number of samples per fine voxel");
+        }
+        params.samples_per_node = a.samples_per_node;
         params.trim_density = a.trim_density;
         let hex = match a.hex {
             Some(h) => {

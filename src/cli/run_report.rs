@@ -147,6 +147,11 @@ pub fn recon_options(c: &ReconstructConfig) -> Vec<(String, String)> {
         ("--density", p.density.to_string()),
         ("--confidence", p.confidence.to_string()),
         (
+            "--samples-per-node",
+            p.samples_per_node
+                .map_or("none".to_string(), |s| s.to_string()),
+        ),
+        (
             "--trim-density",
             p.trim_density.map_or("none".to_string(), |d| d.to_string()),
         ),

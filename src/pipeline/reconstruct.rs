@@ -74,6 +74,10 @@ pub struct ReconParams {
     pub trim_density: Option<f64>,
     /// Weigh each sample's normal by its confidence ([`weigh_by_confidence`]).
     pub confidence: bool,
+    /// Refine a leaf only where it holds at least this many samples per fine voxel of a
+    /// surface crossing it (PoissonRecon's `--samplesPerNode`): see
+    /// [`ReconParams::least_leaf_points`].
+    pub samples_per_node: Option<f64>,
     /// Tile fields and marching cubes on the GPU: auto (a real GPU when there is one), on,
     /// off (the default: the GPU path is not yet measured faster end to end, see
     /// `extract::gpu`).
@@ -87,6 +91,19 @@ pub struct ReconParams {
 }
 
 impl ReconParams {
+    /// The fewest points a leaf of `leaf_voxels` fine voxels a side must own to be refined:
+    /// `--min-points`, or with `--samples-per-node S` at least `S·E²` (a surface crossing a
+    /// leaf of edge `E` covers about `E²` fine voxels, so the leaf is refined only where the
+    /// samples average `S` per fine voxel of surface; sparser parts keep the coarse solve's
+    /// smoother surface, as PoissonRecon's octree stops where a node holds fewer than
+    /// `--samplesPerNode` samples).
+    pub fn least_leaf_points(&self, leaf_voxels: u64) -> u64 {
+        let by_density = self.samples_per_node.map_or(0, |s| {
+            (s * (leaf_voxels * leaf_voxels) as f64).ceil() as u64
+        });
+        self.min_points.max(by_density)
+    }
+
     /// Whether the vertices' sampling densities are measured (written or trimmed by).
     pub fn measures_density(&self) -> bool {
         self.density || self.trim_density.is_some()
@@ -108,6 +125,7 @@ impl ReconParams {
             density: false,
             trim_density: None,
             confidence: false,
+            samples_per_node: None,
             gpu: crate::extract::gpu::GpuMode::Off,
             shard: Shard::ALL,
         }
@@ -543,7 +561,7 @@ fn leaf_pass(
     let (mut solved, mut iterations) = (0, 0u64);
     let rule = LeafRule {
         tolerance: params.error * store.manifest.bounds.diagonal(),
-        min_points: params.min_points,
+        min_points: params.least_leaf_points(plan.leaf_voxels),
     };
     let solvers = LeafSolvers::new(plan);
     // Fixed point for the blend (`extract::field`): the coarse values within 2^21 units;

@@ -135,6 +135,12 @@ impl RunIdentity {
             ("--density", params.density.to_string()),
             ("--confidence", params.confidence.to_string()),
             (
+                "--samples-per-node",
+                params
+                    .samples_per_node
+                    .map_or_else(|| "none".to_string(), |s| s.to_string()),
+            ),
+            (
                 "--trim-density",
                 params
                     .trim_density

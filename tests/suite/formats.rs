@@ -616,3 +616,67 @@ fn confidence_weighting_lets_trusted_samples_win() {
     ]);
     assert!(e.contains("clean.ply") && e.contains("confidence"), "{e}");
 }
+
+/// `--samples-per-node` (PoissonRecon's `--samplesPerNode`): a noisy 30k-point sphere at
+/// depth 8 averages under one sample per fine voxel of surface, so with S = 1 no leaf is
+/// refined and the smoother coarse surface lies closer to the exact sphere than the refined
+/// one; a small S refines as the default does.
+#[test]
+fn samples_per_node_keeps_sparse_parts_coarse() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let pts = d.join("noisy.ply");
+    ok(&[
+        "synth",
+        "sphere",
+        "--points",
+        "30000",
+        "--noise",
+        "0.004",
+        "-o",
+        s(&pts),
+    ]);
+    let truth = d.join("noisy.truth.json");
+    let run_at = |extra: &[&str]| -> (u64, f64) {
+        let out = d.join("m.ply");
+        let mut args = vec![
+            "reconstruct",
+            s(&pts),
+            "-o",
+            s(&out),
+            "--depth",
+            "8",
+            "--progress",
+            "none",
+        ];
+        args.extend_from_slice(extra);
+        let summary = ok(&args);
+        let refined: u64 = summary
+            .split(" refined")
+            .next()
+            .and_then(|h| h.rsplit(' ').next())
+            .and_then(|n| n.parse().ok())
+            .unwrap_or_else(|| panic!("{summary}"));
+        let rep = ok(&["check", s(&out), "--truth", s(&truth), "--json"]);
+        let v: serde_json::Value = serde_json::from_str(&rep).unwrap();
+        let mean = v["comparison"]["absolute"]["to_reference"]["mean"]
+            .as_f64()
+            .unwrap();
+        (refined, mean)
+    };
+    let (r0, e0) = run_at(&[]);
+    let (r1, e1) = run_at(&["--samplesPerNode", "1"]);
+    let (r2, _) = run_at(&["--samples-per-node", "0.01"]);
+    eprintln!("refined {r0}, {r1}, {r2}; mean distance {e0:.3e} (default), {e1:.3e} (S = 1)");
+    assert!(r0 > 100 && r1 == 0 && r2 == r0, "{r0} {r1} {r2}");
+    assert!(e1 < 0.8 * e0, "{e0:e} {e1:e}");
+    let e = usage(&[
+        "reconstruct",
+        s(&pts),
+        "-o",
+        s(&d.join("x.ply")),
+        "--samples-per-node",
+        "0",
+    ]);
+    assert!(e.contains("--samples-per-node 0"), "{e}");
+}
