@@ -247,7 +247,48 @@ pub fn file(fi: &FileInfo, json: bool) -> Result<()> {
     if let Some(l) = &fi.las {
         las(l);
     }
+    if let Some(e) = &fi.e57 {
+        e57(e);
+    }
     Ok(())
+}
+
+/// The E57 lines of `info` on a file: version, CRS, and each scan's pose and sensor.
+fn e57(e: &scanflow::io::e57::E57Meta) {
+    outln!(
+        "e57         version {}, guid {}{}",
+        e.version,
+        e.guid,
+        e.library
+            .as_ref()
+            .map(|l| format!(", written by {l}"))
+            .unwrap_or_default()
+    );
+    outln!(
+        "crs         {}",
+        e.crs.as_deref().unwrap_or("(none recorded)")
+    );
+    for (i, s) in e.scans.iter().enumerate() {
+        let [w, x, y, z] = s.rotation;
+        outln!(
+            "scan {i:<6} {}{} points, {}{}{}; scanner at ({}, {}, {}), rotation (w x y z) {w} {x} {y} {z}{}",
+            s.name
+                .as_ref()
+                .map(|n| format!("{n}: "))
+                .unwrap_or_default(),
+            s.points,
+            s.coordinates,
+            if s.color { ", colour" } else { "" },
+            if s.intensity { ", intensity" } else { "" },
+            s.position[0],
+            s.position[1],
+            s.position[2],
+            s.sensor
+                .as_ref()
+                .map(|v| format!("; sensor {v}"))
+                .unwrap_or_default()
+        );
+    }
 }
 
 /// The LAS lines of `info` on a file: header, CRS, classes and returns, warnings.

@@ -125,6 +125,86 @@ pub fn scan_inputs(path: &Path) -> Result<Vec<InputSpec>> {
         .collect())
 }
 
+/// What `info` shows of an E57 file: its header and every scan's pose and sensor.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct E57Meta {
+    /// Format version, `major.minor`.
+    pub version: String,
+    /// The file's GUID.
+    pub guid: String,
+    /// The library that wrote it, where recorded.
+    pub library: Option<String>,
+    /// The coordinate reference system as written (`coordinateMetadata`: WKT, an EPSG code or
+    /// free text), where recorded.
+    pub crs: Option<String>,
+    /// The scans.
+    pub scans: Vec<ScanMeta>,
+}
+
+/// One scan of an E57 file.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct ScanMeta {
+    /// Its name, where recorded.
+    pub name: Option<String>,
+    /// Records (valid or not).
+    pub points: u64,
+    /// The pose's translation: the scanner's position in the file's frame.
+    pub position: [f64; 3],
+    /// The pose's rotation as a unit quaternion `w x y z`.
+    pub rotation: [f64; 4],
+    /// Vendor, model and serial number of the sensor, where recorded.
+    pub sensor: Option<String>,
+    /// Coordinates stored: `cartesian`, `spherical` or both.
+    pub coordinates: String,
+    /// Colour and intensity stored.
+    pub color: bool,
+    /// Intensity stored.
+    pub intensity: bool,
+}
+
+/// The header and scans of the E57 file `path`.
+pub fn file_meta(path: &Path) -> Result<E57Meta> {
+    crate::io::regular_file(path, "an E57 file")?;
+    let r = e57::E57Reader::from_file(path).map_err(|e| bad(path, e))?;
+    let h = r.header();
+    let scans = r
+        .pointclouds()
+        .iter()
+        .map(|pc| {
+            let t = pc.transform.clone().unwrap_or_default();
+            let sensor: Vec<&str> = [&pc.sensor_vendor, &pc.sensor_model, &pc.sensor_serial]
+                .into_iter()
+                .filter_map(|s| s.as_deref())
+                .collect();
+            ScanMeta {
+                name: pc.name.clone(),
+                points: pc.records,
+                position: [t.translation.x, t.translation.y, t.translation.z],
+                rotation: [t.rotation.w, t.rotation.x, t.rotation.y, t.rotation.z],
+                sensor: (!sensor.is_empty()).then(|| sensor.join(" ")),
+                coordinates: match (pc.has_cartesian(), pc.has_spherical()) {
+                    (true, true) => "cartesian and spherical",
+                    (true, false) => "cartesian",
+                    _ => "spherical",
+                }
+                .to_string(),
+                color: pc.has_color(),
+                intensity: pc.has_intensity(),
+            }
+        })
+        .collect();
+    Ok(E57Meta {
+        version: format!("{}.{}", h.major, h.minor),
+        guid: r.guid().to_string(),
+        library: r.library_version().map(str::to_string),
+        crs: r
+            .coordinate_metadata()
+            .filter(|c| !c.trim().is_empty())
+            .map(str::to_string),
+        scans,
+    })
+}
+
 impl E57Reader {
     /// Open `path`: scan `scan` only, or every scan.
     pub fn open(path: &Path, scan: Option<usize>) -> Result<E57Reader> {

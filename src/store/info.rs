@@ -33,6 +33,9 @@ pub struct FileInfo {
     /// warnings where the CRS contradicts the coordinates.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub las: Option<LasInfo>,
+    /// E57: the header, and every scan's pose and sensor.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub e57: Option<crate::io::e57::E57Meta>,
 }
 
 /// What `info` adds for a LAS or LAZ file.
@@ -97,5 +100,9 @@ pub fn file_info(path: &Path, ctx: &Ctx) -> Result<FileInfo> {
         bounds,
         invalid_points: invalid,
         las,
+        e57: match r.format() {
+            crate::io::Format::E57 => Some(crate::io::e57::file_meta(path)?),
+            _ => None,
+        },
     })
 }

@@ -492,6 +492,11 @@ fn an_e57_of_six_posed_scans_reconstructs_the_sphere() {
     let info = ok(&["info", s(&e57)]);
     assert!(info.contains("E57") && info.contains("20000"), "{info}");
     assert!(info.contains("red green blue intensity"), "{info}");
+    assert!(info.contains("e57         version 1.0"), "{info}");
+    assert!(
+        info.contains("scan 5") && info.contains("scanner at (0, 0, -50)"),
+        "{info}"
+    );
     let mesh = d.join("m.ply");
     recon(&e57, &mesh, &[]);
     let truth = d.join("sphere.truth.json");
