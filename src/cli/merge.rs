@@ -21,6 +21,11 @@ pub fn run(c: &MergeConfig, ctx: &Ctx) -> Result<()> {
     let st = scanflow::pipeline::merge(&c.work_dir, &c.mesh, ctx)?;
     signals::set_note(Some(format!("{} is complete", c.output.display())));
     report::merge(&st, &c.output);
+    let mut fields = serde_json::to_value(&st).unwrap_or_default();
+    if let Some(o) = fields.as_object_mut() {
+        o.insert("output".into(), c.output.display().to_string().into());
+    }
+    ctx.progress.summary("merge", st.secs, &fields);
     let options = vec![(
         "work directory".to_string(),
         c.work_dir.display().to_string(),

@@ -53,6 +53,12 @@ pub fn run(c: &ReconstructConfig, ctx: &Ctx) -> Result<()> {
         return outputs();
     }
     report::reconstruct(&st, &c.output, secs);
+    let mut fields = serde_json::to_value(&st).unwrap_or_default();
+    if let Some(o) = fields.as_object_mut() {
+        o.remove("leaf_map");
+        o.insert("output".into(), c.output.display().to_string().into());
+    }
+    ctx.progress.summary("reconstruct", secs, &fields);
     outputs()?;
     if let Some(job) = &c.hex {
         let st = scanflow::pipeline::hexmesh::hexmesh(job, ctx)?;

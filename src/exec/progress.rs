@@ -81,6 +81,29 @@ impl Progress {
         }
     }
 
+    /// With JSON progress (off a terminal), write the command's final summary as one JSON
+    /// line on stderr: `{"time", "stage": "summary", "command", "total_s", ...fields}`, so a
+    /// cluster log ends with the run's figures in the same form as its progress. Nothing in
+    /// the other modes (the printed summary is the terminal's).
+    pub fn summary(&self, command: &str, total_secs: f64, fields: &serde_json::Value) {
+        if !matches!(self.mode, Mode::Json { .. }) {
+            return;
+        }
+        let mut v = serde_json::json!({
+            "time": timestamp(SystemTime::now()),
+            "stage": "summary",
+            "command": command,
+            "total_s": (total_secs * 1000.0).round() / 1000.0,
+            "peak_rss_bytes": crate::exec::peak_rss_bytes(),
+        });
+        if let (Some(o), serde_json::Value::Object(f)) = (v.as_object_mut(), fields) {
+            for (k, x) in f {
+                o.entry(k.clone()).or_insert_with(|| x.clone());
+            }
+        }
+        self.eprintln(&v.to_string());
+    }
+
     /// The stages finished so far, in order of finishing.
     pub fn records(&self) -> Vec<StageRecord> {
         self.records.lock().map(|r| r.clone()).unwrap_or_default()

@@ -283,3 +283,40 @@ fn completions_and_man_pages_name_the_options() {
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("possible values"));
 }
+
+/// Off a terminal (`--progress json`) every line carries an ISO 8601 time and the run ends
+/// with one summary object holding its figures.
+#[test]
+fn json_progress_lines_are_timed_and_end_with_a_summary() {
+    let dir = tempfile::tempdir().unwrap();
+    let pts = scan(dir.path());
+    let out = dir.path().join("m.ply");
+    let o = run(&[
+        "reconstruct",
+        pts.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--depth",
+        "6",
+        "--progress",
+        "json",
+    ]);
+    assert!(o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    let lines: Vec<serde_json::Value> = err
+        .lines()
+        .filter_map(|l| serde_json::from_str(l).ok())
+        .collect();
+    assert!(lines.len() >= 4, "{err}");
+    for l in &lines {
+        let t = l["time"].as_str().unwrap_or_else(|| panic!("{l}"));
+        assert!(
+            t.len() == 24 && t.ends_with('Z') && t.as_bytes()[10] == b'T',
+            "{t}"
+        );
+    }
+    let last = lines.last().unwrap();
+    assert_eq!(last["stage"], "summary", "{last}");
+    assert_eq!(last["command"], "reconstruct");
+    assert!(last["vertices"].as_u64().unwrap() > 0 && last["total_s"].as_f64().is_some());
+}
