@@ -97,16 +97,7 @@ impl Config {
             Cmd::Merge(a) => Config::Merge(MergeConfig::new(a)?),
             Cmd::Completions(a) => Config::Completions(a),
             Cmd::Man(a) => {
-                if a.output.exists() && !a.output.is_dir() {
-                    bail!("-o {}: exists and is not a directory", a.output.display());
-                }
-                if !paths::parent(&a.output).is_dir() {
-                    bail!(
-                        "-o {}: directory {} does not exist",
-                        a.output.display(),
-                        paths::parent(&a.output).display()
-                    );
-                }
+                paths::output_dir(&a.output)?;
                 Config::Man(a)
             }
         })
@@ -461,6 +452,14 @@ impl ReconstructConfig {
             .map(PathBuf::as_path)
             .collect();
         paths::not_an_input(&a.output, &given)?;
+        for (opt, extra) in [
+            ("--preview", &outputs.preview),
+            ("--report", &outputs.report),
+        ] {
+            if let Some(p) = extra {
+                paths::not_an_input_as(opt, p, &given)?;
+            }
+        }
         let work_dir = work_dir(a.work_dir, &a.output)?;
         let mut params = ReconParams::new(a.depth, work_dir);
         params.tile_voxels = a.tile;
@@ -727,16 +726,7 @@ pub struct DemoConfig {
 
 impl DemoConfig {
     fn new(a: DemoArgs) -> Result<DemoConfig> {
-        if a.output.exists() && !a.output.is_dir() {
-            bail!("-o {}: exists and is not a directory", a.output.display());
-        }
-        if !paths::parent(&a.output).is_dir() {
-            bail!(
-                "-o {}: directory {} does not exist",
-                a.output.display(),
-                paths::parent(&a.output).display()
-            );
-        }
+        paths::output_dir(&a.output)?;
         Ok(DemoConfig {
             run: RunConfig::new(&a.common)?,
             dir: a.output,

@@ -36,6 +36,22 @@ pub fn output_file_as(opt: &str, path: &Path, exts: &[&str], format: &str) -> Re
     writable_parent(path)
 }
 
+/// Check that `-o path` can be a directory to write into: a directory, or nothing yet in an
+/// existing directory.
+pub fn output_dir(path: &Path) -> Result<()> {
+    if path.exists() && !path.is_dir() {
+        bail!("-o {}: exists and is not a directory", path.display());
+    }
+    if !parent(path).is_dir() {
+        bail!(
+            "-o {}: directory {} does not exist",
+            path.display(),
+            parent(path).display()
+        );
+    }
+    Ok(())
+}
+
 /// Check that the directory `path` does not exist yet and that its parent takes it.
 pub fn new_dir(path: &Path) -> Result<()> {
     if path.file_name().is_none() {
@@ -99,17 +115,22 @@ pub fn writable_parent(path: &Path) -> Result<()> {
 /// Refuse an `output` that is one of `inputs` (same path, hard link or symbolic link), or
 /// lies inside an input directory (a store).
 pub fn not_an_input(output: &Path, inputs: &[&Path]) -> Result<()> {
+    not_an_input_as("-o", output, inputs)
+}
+
+/// [`not_an_input`] for the output given by option `opt`.
+pub fn not_an_input_as(opt: &str, output: &Path, inputs: &[&Path]) -> Result<()> {
     for input in inputs {
         if same_file(output, input) {
             bail!(
-                "-o {}: is the input {}; scanflow never overwrites its inputs",
+                "{opt} {}: is the input {}; scanflow never overwrites its inputs",
                 output.display(),
                 input.display()
             );
         }
         if input.is_dir() && inside(output, input) {
             bail!(
-                "-o {}: lies inside the input {}; scanflow never writes into its inputs",
+                "{opt} {}: lies inside the input {}; scanflow never writes into its inputs",
                 output.display(),
                 input.display()
             );

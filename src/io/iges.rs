@@ -242,19 +242,9 @@ impl Section {
 /// `YYYYMMDD.HHNNSS` of `unix_seconds` (UTC), by the days-to-civil conversion of the
 /// proleptic Gregorian calendar (H. Hinnant, `civil_from_days`).
 fn date_string(unix_seconds: i64) -> String {
-    let (days, secs) = (
-        unix_seconds.div_euclid(86_400),
-        unix_seconds.rem_euclid(86_400),
-    );
-    let z = days + 719_468;
-    let era = z.div_euclid(146_097);
-    let doe = z.rem_euclid(146_097);
-    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
-    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
-    let mp = (5 * doy + 2) / 153;
-    let day = doy - (153 * mp + 2) / 5 + 1;
-    let month = if mp < 10 { mp + 3 } else { mp - 9 };
-    let year = yoe + era * 400 + i64::from(month <= 2);
+    let (year, month, day) =
+        crate::exec::progress::civil_from_days(unix_seconds.div_euclid(86_400));
+    let secs = unix_seconds.rem_euclid(86_400);
     format!(
         "{year:04}{month:02}{day:02}.{:02}{:02}{:02}",
         secs / 3600,

@@ -243,39 +243,13 @@ impl Preview {
 mod tests {
     use super::*;
 
-    /// An octahedron of "radius" 1 at the origin, outward.
+    /// The octahedron with corners ±e_i, as outward triangles.
     fn octahedron() -> Vec<[[f64; 3]; 3]> {
-        let v = [
-            [1.0, 0.0, 0.0],
-            [-1.0, 0.0, 0.0],
-            [0.0, 1.0, 0.0],
-            [0.0, -1.0, 0.0],
-            [0.0, 0.0, 1.0],
-            [0.0, 0.0, -1.0],
-        ];
-        let mut t = Vec::new();
-        for &x in &[0usize, 1] {
-            for &y in &[2usize, 3] {
-                for &z in &[4usize, 5] {
-                    let tri = [v[x], v[y], v[z]];
-                    // Outward: the corners' sum points out; flip to counter-clockwise.
-                    let s = [0, 1, 2].map(|a| tri[0][a] + tri[1][a] + tri[2][a]);
-                    let u = [0, 1, 2].map(|a| tri[1][a] - tri[0][a]);
-                    let w = [0, 1, 2].map(|a| tri[2][a] - tri[0][a]);
-                    let n = [
-                        u[1] * w[2] - u[2] * w[1],
-                        u[2] * w[0] - u[0] * w[2],
-                        u[0] * w[1] - u[1] * w[0],
-                    ];
-                    t.push(if dot(n, s) > 0.0 {
-                        tri
-                    } else {
-                        [tri[0], tri[2], tri[1]]
-                    });
-                }
-            }
-        }
-        t
+        let m = crate::metrics::fixtures::octahedron();
+        m.triangles
+            .iter()
+            .map(|t| t.map(|i| m.vertices[i as usize]))
+            .collect()
     }
 
     #[test]

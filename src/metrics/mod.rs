@@ -55,7 +55,7 @@
 
 mod distance;
 #[cfg(test)]
-mod fixtures;
+pub(crate) mod fixtures;
 mod mesh_check;
 mod nearest;
 mod points;
