@@ -98,9 +98,9 @@ pub fn run_check(
     )
 }
 
-/// [`run_check`] with every parameter. A reference PLY with at least one face is read as a
-/// mesh ([`read_mesh`]); any other reference file as points. Giving both a truth and a
-/// reference, or a restriction without a reference or that is not finite and positive, is an
+/// [`run_check`] with every parameter. A reference OBJ or STL, or PLY with at least one
+/// face, is read as a mesh ([`read_any_mesh`]); any other reference file as points. Giving
+/// both a truth and a reference, or a restriction without a reference or that is not finite and positive, is an
 /// [`Error::Usage`].
 pub fn run_check_with(
     mesh: &Path,
