@@ -116,11 +116,19 @@ fn alive(pid: u32) -> bool {
     !proc.join("self").exists() || proc.join(pid.to_string()).exists()
 }
 
-/// The pid in a temporary name `NAME.tmp-<pid>[@<host>][.faces]` of `name`, if `file` is one
-/// made on this host (another host's process cannot be checked: it counts as alive).
+/// Suffixes of the staging files a writer keeps beside its temporary file (the mesh writer's
+/// vertices, faces and normals): `NAME.tmp-<pid>.vertices` belongs to `NAME.tmp-<pid>`.
+pub const STAGING_SUFFIXES: [&str; 3] = [".vertices", ".faces", ".normals"];
+
+/// The pid in a temporary name `NAME.tmp-<pid>[@<host>][.vertices|.faces|.normals]` of
+/// `name`, if `file` is one made on this host (another host's process cannot be checked: it
+/// counts as alive).
 fn temp_pid(file: &str, name: &str) -> Option<u32> {
     let rest = file.strip_prefix(name)?.strip_prefix(".tmp-")?;
-    let rest = rest.strip_suffix(".faces").unwrap_or(rest);
+    let rest = STAGING_SUFFIXES
+        .iter()
+        .find_map(|s| rest.strip_suffix(s))
+        .unwrap_or(rest);
     let digits = match rest.split_once('@') {
         Some((digits, host)) if host == this_host() => digits,
         Some(_) => return None,
@@ -482,6 +490,8 @@ mod tests {
     fn stale_temps_of_dead_processes_go_and_others_stay() {
         assert_eq!(temp_pid("m.ply.tmp-42", "m.ply"), Some(42));
         assert_eq!(temp_pid("m.ply.tmp-42.faces", "m.ply"), Some(42));
+        assert_eq!(temp_pid("m.ply.tmp-42.vertices", "m.ply"), Some(42));
+        assert_eq!(temp_pid("m.ply.tmp-42.normals", "m.ply"), Some(42));
         assert_eq!(temp_pid("m.ply.tmp-x", "m.ply"), None);
         assert_eq!(temp_pid("n.ply.tmp-42", "m.ply"), None);
         // Another host's process cannot be checked from here: never stale.

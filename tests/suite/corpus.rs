@@ -1258,7 +1258,7 @@ fn option_cases(c: &mut Corpus) {
             "--neighbours",
         ),
         ("opt_gpu_word", "o.ply", &["--gpu", "maybe"], "--gpu"),
-        ("opt_out_obj", "o.obj", &[], "o.obj"),
+        ("opt_out_off", "o.off", &[], "o.off"),
         ("opt_out_no_dir", "missing/o.ply", &[], "missing"),
     ];
     for (name, out, extra, named) in cases {

@@ -186,7 +186,7 @@ fn options_and_output_paths_are_checked_before_any_work() {
     }
     let bad_out = [
         (missing.join("y.ply"), "does not exist"),
-        (d.path().join("x.obj"), "name the output *.ply"),
+        (d.path().join("x.off"), "name the output *.ply"),
         (d.path().to_path_buf(), "name the output *.ply"),
     ];
     for (o, want) in &bad_out {
