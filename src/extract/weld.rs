@@ -54,6 +54,8 @@ pub struct Welder {
     last: Option<u64>,
     /// Largest frontier seen.
     peak: usize,
+    /// Global indices of the vertices the last tile completed: no later tile can name them.
+    released: Vec<u64>,
 }
 
 impl Welder {
@@ -97,6 +99,7 @@ impl Welder {
             )));
         }
         self.local.clear();
+        self.released.clear();
         for (i, (&key, &p)) in mesh.keys.iter().zip(&mesh.positions).enumerate() {
             if let Some(&g) = self.frontier.get(&key) {
                 self.local.push(g);
@@ -115,6 +118,8 @@ impl Welder {
             if lt > t {
                 self.frontier.insert(key, g);
                 self.expiry.entry(lt).or_default().push(key);
+            } else {
+                self.released.push(g);
             }
             self.local.push(g);
         }
@@ -136,7 +141,9 @@ impl Welder {
                 break;
             }
             for k in entry.remove() {
-                self.frontier.remove(&k);
+                if let Some(g) = self.frontier.remove(&k) {
+                    self.released.push(g);
+                }
             }
         }
         Ok(())
@@ -150,6 +157,17 @@ impl Welder {
     /// The global index of each vertex of the last tile added, by its index in the tile.
     pub fn tile_indices(&self) -> &[u64] {
         &self.local
+    }
+
+    /// The vertices the last tile completed (no later tile can name them), by global index.
+    pub fn released(&self) -> &[u64] {
+        &self.released
+    }
+
+    /// The vertices still held (their last tiles were never added), by global index, in no
+    /// particular order.
+    pub fn held(&self) -> impl Iterator<Item = u64> + '_ {
+        self.frontier.values().copied()
     }
 
     /// Keys held now.
@@ -346,9 +364,18 @@ mod tests {
         )
         .unwrap();
         assert_eq!((n, w.frontier_len()), (3, 3));
-        // Tile 5 is empty but comes after every key's last tile.
+        // Held, not released: their last tile (4) is still to come.
+        assert!(w.released().is_empty());
+        let mut held: Vec<u64> = w.held().collect();
+        held.sort_unstable();
+        assert_eq!(held, [0, 1, 2]);
+        // Tile 5 is empty but comes after every key's last tile: it releases all three.
         w.add_tile(5, &TileMesh::default(), |_| 5, |_, _, _| Ok(()), |_| Ok(()))
             .unwrap();
+        let mut released = w.released().to_vec();
+        released.sort_unstable();
+        assert_eq!(released, [0, 1, 2]);
+        assert_eq!(w.held().count(), 0);
         assert_eq!(w.frontier_len(), 0);
         assert_eq!(w.peak_frontier(), 3);
         assert_eq!(w.vertices(), 3);

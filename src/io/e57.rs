@@ -28,7 +28,7 @@ use crossbeam_channel::{Receiver, Sender, bounded};
 
 use super::{ChunkSpec, ChunkStats, Format, InputSpec, PointReader};
 use crate::error::{Error, Result};
-use crate::types::{Aabb, Attributes, PointBatch, Rigid, Viewpoint};
+use crate::types::{Attributes, PointBatch, Rigid, Viewpoint};
 
 /// The most decoding streams a reader keeps (see the module docs).
 pub const MAX_STREAMS: usize = 16;
@@ -65,7 +65,6 @@ pub struct E57Reader {
     scans: Vec<Scan>,
     len: u64,
     attrs: Attributes,
-    bounds: Option<Aabb>,
     /// The scans' point clouds, for new streams.
     pcs: Vec<e57::PointCloud>,
     /// The decoding streams.
@@ -251,7 +250,6 @@ impl E57Reader {
             scans,
             len,
             attrs,
-            bounds: None,
             pcs: chosen.iter().map(|&i| pcs[i].clone()).collect(),
             streams: Mutex::default(),
         })
@@ -420,10 +418,6 @@ impl PointReader for E57Reader {
 
     fn len(&self) -> u64 {
         self.len
-    }
-
-    fn header_bounds(&self) -> Option<Aabb> {
-        self.bounds
     }
 
     fn chunks(&self, target_points: u64) -> Result<Vec<ChunkSpec>> {

@@ -80,6 +80,7 @@ use std::path::{Path, PathBuf};
 
 use super::atomic::{self, AtomicFile, with_suffix};
 use crate::error::{Error, IoContext, Result};
+use crate::synth::vec::{cross, norm, sub};
 
 /// Size of each write buffer.
 const BUF_BYTES: usize = 1 << 20;
@@ -644,7 +645,8 @@ impl MeshWriter {
         let path = self.normals.path.clone();
         let f = self.normals.writer()?;
         let mut run: Vec<u8> = Vec::new();
-        let mut start = 0u64;
+        // Where the file's position is (none known before the first run).
+        let mut start = u64::MAX;
         let mut at = 0usize;
         while at < self.pending.len() {
             let first = self.pending[at].0;
@@ -656,7 +658,7 @@ impl MeshWriter {
                 }
                 end += 1;
             }
-            if first != start || at == 0 {
+            if first != start {
                 f.seek(SeekFrom::Start(first * 12)).with_path(&path)?;
             }
             f.write_all(&run).with_path(&path)?;
@@ -978,14 +980,9 @@ impl MeshWriter {
 /// The unit normal of triangle `p` (counter-clockwise seen from its front), zero where it has
 /// no area.
 fn unit_normal(p: [[f32; 3]; 3]) -> [f32; 3] {
-    let u = [0, 1, 2].map(|a| f64::from(p[1][a]) - f64::from(p[0][a]));
-    let v = [0, 1, 2].map(|a| f64::from(p[2][a]) - f64::from(p[0][a]));
-    let c = [
-        u[1] * v[2] - u[2] * v[1],
-        u[2] * v[0] - u[0] * v[2],
-        u[0] * v[1] - u[1] * v[0],
-    ];
-    let len = (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt();
+    let p = p.map(|c| c.map(f64::from));
+    let c = cross(sub(p[1], p[0]), sub(p[2], p[0]));
+    let len = norm(c);
     if len > 0.0 && len.is_finite() {
         c.map(|x| (x / len) as f32)
     } else {

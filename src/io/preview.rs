@@ -20,6 +20,7 @@ use std::path::Path;
 
 use crate::error::Result;
 use crate::io::atomic::{self, Durability};
+use crate::synth::vec::{cross, dot, norm, sub};
 use crate::types::Aabb;
 
 /// Share of each view's side left empty on either edge.
@@ -50,10 +51,6 @@ fn views() -> [[[f64; 3]; 3]; 3] {
         // Isometric from (+x, -y, +z): looking along (-1, 1, -1)/sqrt 3.
         [[s2, s2, 0.0], [-s6, s6, 2.0 * s6], [-s3, s3, -s3]],
     ]
-}
-
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
 /// The three views of a mesh being drawn.
@@ -115,14 +112,8 @@ impl Preview {
     /// `colors` where the mesh has colours.
     pub fn triangle(&mut self, p: [[f64; 3]; 3], colors: Option<[[u8; 3]; 3]>) {
         self.triangles += 1;
-        let u = [0, 1, 2].map(|a| p[1][a] - p[0][a]);
-        let w = [0, 1, 2].map(|a| p[2][a] - p[0][a]);
-        let n = [
-            u[1] * w[2] - u[2] * w[1],
-            u[2] * w[0] - u[0] * w[2],
-            u[0] * w[1] - u[1] * w[0],
-        ];
-        let len = dot(n, n).sqrt();
+        let n = cross(sub(p[1], p[0]), sub(p[2], p[0]));
+        let len = norm(n);
         if !(len > 0.0 && len.is_finite()) {
             return;
         }
@@ -262,11 +253,7 @@ mod tests {
                 assert!((dot(a, a) - 1.0).abs() < 1e-12, "view {v}");
             }
             // right × up points at the viewer (against forward).
-            let c = [
-                r[1] * u[2] - r[2] * u[1],
-                r[2] * u[0] - r[0] * u[2],
-                r[0] * u[1] - r[1] * u[0],
-            ];
+            let c = cross(r, u);
             assert!((dot(c, f) + 1.0).abs() < 1e-12, "view {v}");
             // Up has no downward part: z never points down the picture.
             assert!(u[2] > 0.0, "view {v}");

@@ -3,7 +3,7 @@
 //! the GPU, fitted to the input points and coloured, trimmed, checkpointed, then welded and
 //! streamed to the writer in Morton order.
 
-use std::collections::{BTreeMap, BTreeSet, HashMap, HashSet};
+use std::collections::{BTreeSet, HashMap, HashSet};
 use std::path::Path;
 use std::sync::{Arc, Mutex};
 
@@ -25,6 +25,7 @@ use crate::io::preview::Preview;
 use crate::recon::checkpoint::{read_tile, tile_path, write_tile};
 use crate::recon::{CoarseField, Plan, leaves_near, pou, tile_blend};
 use crate::surface::{NearPoints, Support, settle, trim_by_density, trim_mesh};
+use crate::synth::vec::{add, cross, norm, sub};
 use crate::types::{Aabb, CellKey, Detail, EdgeKey, GridGeom, TileMesh, demorton3, morton3};
 
 /// Bytes a tile node holds while its field is built: the blend's i64 accumulator (8) and the
@@ -275,37 +276,24 @@ pub(super) struct MeshSink {
 /// A vertex's normal is the sum of its triangles' cross products `(b − a) × (c − a)`, each
 /// taken from the corner with the smallest edge key and the sum taken in sorted order, so it
 /// is the same number whichever tile holds which triangle (any `--tile`, any shard count).
-/// A vertex is complete after the last tile that can hold its edge; until then it holds its
-/// triangles' vectors (memory follows the welder's frontier).
+/// A vertex is complete when the welder releases it ([`Welder::released`]); until then it
+/// holds its triangles' vectors (memory follows the welder's frontier).
 #[derive(Default)]
 struct NormalSums {
     /// Each incomplete vertex's triangle vectors, by global index.
     pending: HashMap<u64, Vec<[f64; 3]>>,
-    /// Incomplete vertices by the tile after which they are complete.
-    expiry: BTreeMap<u64, Vec<u64>>,
 }
 
 impl NormalSums {
-    /// Add tile `tt`'s triangles (its vertices' global indices `global`, those from `first_new`
-    /// on new, completed after tile `last_tile(key)`), then give the writer the normals of the
-    /// vertices complete after this tile.
+    /// Add the triangles of `mesh` (its vertices' global indices `global`), then give the
+    /// writer the normals of the vertices `done`.
     fn add(
         &mut self,
-        tt: u64,
         mesh: &TileMesh,
         global: &[u64],
-        first_new: u64,
-        last_tile: impl Fn(EdgeKey) -> u64,
+        done: impl IntoIterator<Item = u64>,
         writer: &mut MeshWriter,
     ) -> Result<()> {
-        for (i, &g) in global.iter().enumerate() {
-            if g >= first_new {
-                self.expiry
-                    .entry(last_tile(mesh.keys[i]))
-                    .or_default()
-                    .push(g);
-            }
-        }
         for t in &mesh.triangles {
             let t = t.map(|i| i as usize);
             // From the corner with the smallest key, winding kept.
@@ -313,48 +301,35 @@ impl NormalSums {
                 .min_by_key(|&k| mesh.keys[t[k]].0)
                 .expect("three corners");
             let [a, b, c] = [t[r], t[(r + 1) % 3], t[(r + 2) % 3]].map(|i| mesh.positions[i]);
-            let u = [0, 1, 2].map(|d| b[d] - a[d]);
-            let v = [0, 1, 2].map(|d| c[d] - a[d]);
-            let n = [
-                u[1] * v[2] - u[2] * v[1],
-                u[2] * v[0] - u[0] * v[2],
-                u[0] * v[1] - u[1] * v[0],
-            ];
+            let n = cross(sub(b, a), sub(c, a));
             for &i in &t {
                 self.pending.entry(global[i]).or_default().push(n);
             }
         }
-        self.release(Some(tt), writer)
+        self.release(done, writer)
     }
 
-    /// Give the writer the normals of the vertices complete after tile `upto` (`None`: all
-    /// left, at the end: their last tiles held no surface).
-    fn release(&mut self, upto: Option<u64>, writer: &mut MeshWriter) -> Result<()> {
-        while let Some(entry) = self.expiry.first_entry() {
-            if upto.is_some_and(|tt| *entry.key() > tt) {
-                break;
-            }
-            for g in entry.remove() {
-                let mut ns = self.pending.remove(&g).unwrap_or_default();
-                ns.sort_by(|p, q| {
-                    (p[0].total_cmp(&q[0]))
-                        .then(p[1].total_cmp(&q[1]))
-                        .then(p[2].total_cmp(&q[2]))
-                });
-                let mut s = [0f64; 3];
-                for n in &ns {
-                    for d in 0..3 {
-                        s[d] += n[d];
-                    }
-                }
-                let len = (s[0] * s[0] + s[1] * s[1] + s[2] * s[2]).sqrt();
-                let unit = if len > 0.0 && len.is_finite() {
-                    s.map(|x| (x / len) as f32)
-                } else {
-                    [0.0; 3]
-                };
-                writer.normal(g, unit)?;
-            }
+    /// Give the writer the normals of the vertices `done`.
+    fn release(
+        &mut self,
+        done: impl IntoIterator<Item = u64>,
+        writer: &mut MeshWriter,
+    ) -> Result<()> {
+        for g in done {
+            let mut ns = self.pending.remove(&g).unwrap_or_default();
+            ns.sort_by(|p, q| {
+                (p[0].total_cmp(&q[0]))
+                    .then(p[1].total_cmp(&q[1]))
+                    .then(p[2].total_cmp(&q[2]))
+            });
+            let s = ns.iter().fold([0f64; 3], |s, n| add(s, *n));
+            let len = norm(s);
+            let unit = if len > 0.0 && len.is_finite() {
+                s.map(|x| (x / len) as f32)
+            } else {
+                [0.0; 3]
+            };
+            writer.normal(g, unit)?;
         }
         Ok(())
     }
@@ -404,7 +379,6 @@ impl MeshSink {
             let (node, _axis) = geom.decode_edge(key);
             morton3(node.map(|v| (v / tile).min(n - 1) as u32))
         };
-        let first_new = self.welder.vertices();
         // Both welder callbacks write to the one writer.
         let writer = &self.writer;
         self.welder.add_tile(
@@ -422,13 +396,11 @@ impl MeshSink {
             |tri| writer.borrow_mut().triangle(tri),
         )?;
         if let Some(sums) = self.normals.as_mut() {
-            let global = self.welder.tile_indices();
+            let (global, done) = (self.welder.tile_indices(), self.welder.released());
             sums.add(
-                tt,
                 mesh,
                 global,
-                first_new,
-                last_tile,
+                done.iter().copied(),
                 &mut self.writer.borrow_mut(),
             )?;
         }
@@ -449,8 +421,9 @@ impl MeshSink {
     /// triangle is an error naming `input` (nothing appears under the output's name).
     pub(super) fn finish(self, input: &Path, iso: f64, depth: u32) -> Result<TileStats> {
         let mut writer = self.writer.into_inner();
+        // Vertices whose last tiles held no surface are complete now.
         if let Some(mut sums) = self.normals {
-            sums.release(None, &mut writer)?;
+            sums.release(self.welder.held(), &mut writer)?;
         }
         if writer.triangles() == 0 {
             // Dropping the writer removes its temporary files.
