@@ -328,6 +328,35 @@ fn what_a_format_cannot_hold_is_refused_before_any_work() {
     assert!(e.contains("--hex"), "{e}");
     let e = usage(&["merge", s(d), "-o", s(&out("m.stl")), "--out-normals"]);
     assert!(e.contains("--out-normals"), "{e}");
+    let e = usage(&[
+        "reconstruct",
+        s(&pts),
+        "-o",
+        s(&out("m.ply")),
+        "--preview",
+        s(&out("p.jpg")),
+    ]);
+    assert!(e.contains("--preview") && e.contains("p.jpg"), "{e}");
+    let e = usage(&[
+        "reconstruct",
+        s(&pts),
+        "-o",
+        s(&out("m.ply")),
+        "--report",
+        s(&out("r.txt")),
+    ]);
+    assert!(e.contains("--report") && e.contains("*.html"), "{e}");
+    let e = usage(&[
+        "reconstruct",
+        s(&pts),
+        "-o",
+        s(&out("m.ply")),
+        "--preview",
+        s(&out("p.png")),
+        "--shard",
+        "0/2",
+    ]);
+    assert!(e.contains("--preview") && e.contains("merge"), "{e}");
     // Nothing was written.
     let left: Vec<_> = std::fs::read_dir(d).unwrap().collect();
     assert!(left.is_empty(), "{left:?}");
