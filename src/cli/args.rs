@@ -105,6 +105,16 @@ pub struct MeshOutOpts {
     /// nz, OBJ vn; PoissonRecon's --normals output). STL always has each triangle's.
     #[arg(long)]
     pub out_normals: bool,
+    /// Leave out every connected piece of the mesh whose area is under R of the whole, with
+    /// its vertices: the small islands trimming leaves (PoissonRecon's SurfaceTrimmer
+    /// --aRatio, whose default is 0.001). 0 <= R < 1.
+    #[arg(
+        long,
+        value_name = "R",
+        alias = "aRatio",
+        allow_negative_numbers = true
+    )]
+    pub trim_islands: Option<f64>,
     /// Write a picture of the mesh here (PNG: front, side and isometric views, drawn as the
     /// mesh is written).
     #[arg(long, value_name = "PNG")]
@@ -571,9 +581,10 @@ pub struct ReconstructArgs {
     /// CloudCompare), to trim by after the fact as with PoissonRecon's --density.
     #[arg(long)]
     pub density: bool,
-    /// Weigh each sample's normal by its confidence (the PLY's `confidence` property, clamped
-    /// to [0, 1]), as PoissonRecon's --confidence: less trusted samples pull the surface less
-    /// where better ones overlap them.
+    /// Weigh each sample's normal by its confidence, as PoissonRecon's --confidence: the PLY's
+    /// `confidence` property clamped to [0, 1], or, where there is none, the length of the
+    /// normals the inputs carry. Less trusted samples pull the surface less where better ones
+    /// overlap them. Without it every normal counts as unit length.
     #[arg(long)]
     pub confidence: bool,
     /// Drop the triangles whose corners' mean sampling density (input points per square

@@ -513,10 +513,22 @@ impl ReconstructConfig {
             && let Points::Files(inputs, _) = &points
         {
             // Headers only: refused before any work.
-            for f in &inputs.files {
-                if !scanflow::io::open(f)?.attributes().confidence {
+            let attrs = inputs
+                .files
+                .iter()
+                .map(|f| Ok(scanflow::io::open(f)?.attributes()))
+                .collect::<Result<Vec<_>>>()?;
+            // Normals come from the inputs (so their lengths can be confidences) unless they
+            // are estimated: always with `estimate`, with `auto` when one input has none.
+            let kept = match a.normal.normals {
+                super::args::NormalsChoice::Estimate => false,
+                super::args::NormalsChoice::Use => true,
+                super::args::NormalsChoice::Auto => attrs.iter().all(|at| at.normal),
+            };
+            for (f, at) in inputs.files.iter().zip(&attrs) {
+                if !(at.confidence || (at.normal && kept)) {
                     bail!(
-                        "--confidence: {} carries no confidence (a PLY vertex property \"confidence\"), so there is nothing to weigh its points by",
+                        "--confidence: {} carries no confidence (a PLY vertex property \"confidence\") and no normals whose lengths could be the confidences, so there is nothing to weigh its points by",
                         f.display()
                     );
                 }
@@ -620,10 +632,18 @@ fn mesh_target(path: &Path, o: &MeshOutOpts, density: bool) -> Result<(MeshTarge
         r.extension()
             .is_some_and(|e| e.eq_ignore_ascii_case("html"))
     });
+    if let Some(r) = o.trim_islands
+        && !(0.0..1.0).contains(&r)
+    {
+        bail!(
+            "--trim-islands {r}: expected a fraction of the mesh's area, at least 0 and under 1 (PoissonRecon's --aRatio default is 0.001)"
+        );
+    }
     let mesh = MeshTarget {
         path: path.to_path_buf(),
         format,
         normals: o.out_normals,
+        islands: o.trim_islands,
         preview: (o.preview.is_some() || html).then_some(PREVIEW_SIDE),
     };
     let outputs = RunOutputs {

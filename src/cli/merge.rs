@@ -8,7 +8,7 @@ use scanflow::exec::Ctx;
 use scanflow::pipeline::workdir;
 
 use super::config::MergeConfig;
-use super::run_report::RunStart;
+use super::run_report::{RunEnd, RunStart};
 use super::{report, signals};
 
 /// Merge and print the summary.
@@ -31,17 +31,19 @@ pub fn run(c: &MergeConfig, ctx: &Ctx) -> Result<()> {
         c.work_dir.display().to_string(),
     )];
     run.finish(
-        "merge",
         ctx,
-        std::slice::from_ref(&c.work_dir),
-        None,
-        options,
-        &c.output,
-        serde_json::to_value(&st).unwrap_or_default(),
-        None,
-        st.preview.clone(),
-        Some(st.faces),
-        st.secs,
+        RunEnd {
+            command: "merge",
+            inputs: std::slice::from_ref(&c.work_dir),
+            points: None,
+            options,
+            output: &c.output,
+            result: serde_json::to_value(&st).unwrap_or_default(),
+            leaf_map: None,
+            preview: st.preview.clone(),
+            triangles: Some(st.faces),
+            secs: st.secs,
+        },
     )?;
     if !c.keep_work {
         let left = workdir::remove_owned(&c.work_dir)?;

@@ -19,7 +19,7 @@ use scanflow::store::Store;
 
 use super::config::{Points, ReconstructConfig};
 use super::ingest::input_specs;
-use super::run_report::{RunStart, recon_options};
+use super::run_report::{RunEnd, RunStart, recon_options};
 use super::{paths, report, signals};
 
 /// Reconstruct and print the summary; write the picture and the report when asked.
@@ -34,17 +34,19 @@ pub fn run(c: &ReconstructConfig, ctx: &Ctx) -> Result<()> {
     };
     let outputs = || {
         run.finish(
-            "reconstruct",
             ctx,
-            &inputs,
-            Some(st.points),
-            recon_options(c),
-            &c.output,
-            serde_json::to_value(&st).unwrap_or_default(),
-            Some(st.leaf_map.clone()),
-            st.preview.clone(),
-            (!c.params.shard.is_split()).then_some(st.faces),
-            secs,
+            RunEnd {
+                command: "reconstruct",
+                inputs: &inputs,
+                points: Some(st.points),
+                options: recon_options(c),
+                output: &c.output,
+                result: serde_json::to_value(&st).unwrap_or_default(),
+                leaf_map: Some(st.leaf_map.clone()),
+                preview: st.preview.clone(),
+                triangles: (!c.params.shard.is_split()).then_some(st.faces),
+                secs,
+            },
         )
     };
     if c.params.shard.is_split() {

@@ -289,6 +289,9 @@ fn e57(e: &scanflow::io::e57::E57Meta) {
                 .unwrap_or_default()
         );
     }
+    for w in &e.warnings {
+        outln!("warning     {w}");
+    }
 }
 
 /// The LAS lines of `info` on a file: header, CRS, classes and returns, warnings.

@@ -60,6 +60,30 @@ fn size_of(path: &Path) -> u64 {
     }
 }
 
+/// What a finished run gives its picture and report.
+pub struct RunEnd<'a> {
+    /// The subcommand.
+    pub command: &'a str,
+    /// The inputs as given (files, a store, a work directory).
+    pub inputs: &'a [PathBuf],
+    /// Input points, where the run counted them.
+    pub points: Option<u64>,
+    /// The options that shaped the result, as (name, value).
+    pub options: Vec<(String, String)>,
+    /// The output written.
+    pub output: &'a Path,
+    /// The run's statistics.
+    pub result: serde_json::Value,
+    /// Leaves holding points and refined leaves, where the run solved them.
+    pub leaf_map: Option<LeafMap>,
+    /// The picture drawn as the mesh was written.
+    pub preview: Option<Preview>,
+    /// The output's triangles; `None` where no mesh was written (a shard).
+    pub triangles: Option<u64>,
+    /// Wall time of the run.
+    pub secs: f64,
+}
+
 /// What a run notes at its start for its picture and report.
 pub struct RunStart {
     outputs: RunOutputs,
@@ -77,23 +101,21 @@ impl RunStart {
         }
     }
 
-    /// Write the picture and the report asked for (the report checks the output when
-    /// `triangles` is given and fits the budget).
-    #[allow(clippy::too_many_arguments)]
-    pub fn finish(
-        self,
-        command: &str,
-        ctx: &Ctx,
-        inputs: &[PathBuf],
-        points: Option<u64>,
-        options: Vec<(String, String)>,
-        output: &Path,
-        result: serde_json::Value,
-        leaf_map: Option<LeafMap>,
-        preview: Option<Preview>,
-        triangles: Option<u64>,
-        secs: f64,
-    ) -> Result<()> {
+    /// Write the picture and the report asked for, of the run `end` describes (the report
+    /// checks the output when `end.triangles` is given and fits the budget).
+    pub fn finish(self, ctx: &Ctx, end: RunEnd) -> Result<()> {
+        let RunEnd {
+            command,
+            inputs,
+            points,
+            options,
+            output,
+            result,
+            leaf_map,
+            preview,
+            triangles,
+            secs,
+        } = end;
         let memory = self.timeline.map(MemoryTimeline::stop).unwrap_or_default();
         if let (Some(path), Some(p)) = (&self.outputs.preview, &preview) {
             p.write_png(path)?;
@@ -164,6 +186,10 @@ pub fn recon_options(c: &ReconstructConfig) -> Vec<(String, String)> {
         ("--shard", p.shard.to_string()),
         ("format", c.mesh.format.name().to_string()),
         ("--out-normals", c.mesh.normals.to_string()),
+        (
+            "--trim-islands",
+            c.mesh.islands.map_or("none".to_string(), |r| r.to_string()),
+        ),
         (
             "--threads",
             match c.run.threads {

@@ -66,6 +66,8 @@ pub struct Progress {
     multi: Option<indicatif::MultiProgress>,
     /// Every finished stage, in order of finishing.
     records: Arc<Mutex<Vec<StageRecord>>>,
+    /// Stages started so far: the next stage's ordinal.
+    started: Arc<AtomicU64>,
     created: Instant,
 }
 
@@ -77,6 +79,7 @@ impl Progress {
             mode,
             multi,
             records: Arc::default(),
+            started: Arc::default(),
             created: Instant::now(),
         }
     }
@@ -132,6 +135,11 @@ impl Progress {
     pub fn stage(&self, name: &str, total: Option<u64>, unit: &'static str) -> Stage {
         let done = Arc::new(AtomicU64::new(0));
         let start = Instant::now();
+        let clock = Clock {
+            run: self.created,
+            stage: start,
+            step: self.started.fetch_add(1, Ordering::Relaxed) + 1,
+        };
         let mut bar = None;
         let mut ticker = None;
         match (self.mode, &self.multi) {
@@ -169,7 +177,7 @@ impl Progress {
                             d.load(Ordering::Relaxed),
                             total,
                             unit,
-                            start,
+                            clock,
                             None,
                         );
                     }
@@ -183,7 +191,7 @@ impl Progress {
             unit,
             total,
             done,
-            start,
+            clock,
             bar,
             ticker,
             json: matches!(self.mode, Mode::Json { .. }),
@@ -201,7 +209,7 @@ pub struct Stage {
     unit: &'static str,
     total: Option<u64>,
     done: Arc<AtomicU64>,
-    start: Instant,
+    clock: Clock,
     bar: Option<indicatif::ProgressBar>,
     ticker: Option<(Sender<()>, std::thread::JoinHandle<()>)>,
     json: bool,
@@ -220,6 +228,16 @@ impl Stage {
         }
     }
 
+    /// A counter for work inside one large item (a cell's points): `tick` per unit is
+    /// cheap, and the stage sees the units in batches of [`Ticker::BATCH`], so a running
+    /// stage's lines move while a big cell is still being worked on.
+    pub fn ticker(&self) -> Ticker<'_> {
+        Ticker {
+            stage: self,
+            pending: 0,
+        }
+    }
+
     /// Units done so far.
     pub fn done(&self) -> u64 {
         self.done.load(Ordering::Relaxed)
@@ -235,7 +253,7 @@ impl Stage {
                 self.done(),
                 self.total,
                 self.unit,
-                self.start,
+                self.clock,
                 extra,
             );
         }
@@ -246,13 +264,14 @@ impl Stage {
             drop(tx);
             let _ = h.join();
         }
-        let secs = self.start.elapsed().as_secs_f64();
-        // A finished bar gives way to one line: the stage, its count, time and rate.
+        let secs = self.clock.stage.elapsed().as_secs_f64();
+        // A finished bar gives way to one line: the stage, its count, time and rate, and the
+        // run's time so far.
         if let Some(b) = self.bar.take() {
             b.finish_and_clear();
             let done = self.done();
             let line = format!(
-                "{:>8}  {} {} in {:.1} s ({}/s)",
+                "{:>8}  {} {} in {:.1} s ({}/s), run {:.1} s",
                 self.name,
                 indicatif::HumanCount(done),
                 self.unit,
@@ -261,7 +280,8 @@ impl Stage {
                     (done as f64 / secs).round() as u64
                 } else {
                     0
-                })
+                }),
+                self.clock.run.elapsed().as_secs_f64()
             );
             match &self.multi {
                 Some(m) => {
@@ -286,33 +306,86 @@ impl Stage {
     }
 }
 
+/// Counts units for a [`Stage`] in batches; what is pending is counted when it is dropped.
+#[derive(Debug)]
+pub struct Ticker<'a> {
+    stage: &'a Stage,
+    pending: u64,
+}
+
+impl Ticker<'_> {
+    /// Units counted locally before they are added to the stage.
+    pub const BATCH: u64 = 4096;
+
+    /// One unit done.
+    pub fn tick(&mut self) {
+        self.pending += 1;
+        if self.pending >= Self::BATCH {
+            self.stage.inc(self.pending);
+            self.pending = 0;
+        }
+    }
+}
+
+impl Drop for Ticker<'_> {
+    fn drop(&mut self) {
+        if self.pending > 0 {
+            self.stage.inc(self.pending);
+        }
+    }
+}
+
 impl Drop for Stage {
     fn drop(&mut self) {
         self.stop();
     }
 }
 
+/// When a stage started, when its command did, and the stage's ordinal in the command.
+#[derive(Debug, Clone, Copy)]
+struct Clock {
+    run: Instant,
+    stage: Instant,
+    step: u64,
+}
+
+/// One JSON progress line. `elapsed_s` is the stage's time, `run_s` the command's, `step`
+/// the stage's ordinal among the command's stages; `eta_s` (running, with a known total and
+/// some done) extrapolates the stage's rate.
 fn emit(
     name: &str,
     state: &str,
     done: u64,
     total: Option<u64>,
     unit: &str,
-    start: Instant,
+    clock: Clock,
     extra: Option<serde_json::Value>,
 ) {
-    let secs = start.elapsed().as_secs_f64();
+    let ms = |s: f64| (s * 1000.0).round() / 1000.0;
+    let secs = clock.stage.elapsed().as_secs_f64();
     let mut v = serde_json::json!({
         "time": timestamp(SystemTime::now()),
         "stage": name,
+        "step": clock.step,
         "state": state,
         "done": done,
         "total": total,
         "unit": unit,
-        "elapsed_s": (secs * 1000.0).round() / 1000.0,
+        "elapsed_s": ms(secs),
+        "run_s": ms(clock.run.elapsed().as_secs_f64()),
         "per_s": if secs > 0.0 { (done as f64 / secs).round() } else { 0.0 },
         "peak_rss_bytes": crate::exec::peak_rss_bytes(),
     });
+    if let (Some(t), Some(o)) = (total, v.as_object_mut())
+        && state == "running"
+        && done > 0
+        && done < t
+    {
+        o.insert(
+            "eta_s".into(),
+            serde_json::json!((secs * (t - done) as f64 / done as f64).round()),
+        );
+    }
     if let (Some(serde_json::Value::Object(m)), Some(o)) = (extra, v.as_object_mut()) {
         o.extend(m);
     }
@@ -363,5 +436,41 @@ mod timestamp_tests {
         assert_eq!(at(951_782_400, 5), "2000-02-29T00:00:00.005Z");
         assert_eq!(at(1_795_729_083, 123), "2026-11-26T21:38:03.123Z");
         assert_eq!(at(4_107_542_399, 999), "2100-02-28T23:59:59.999Z");
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_ticker_counts_in_batches_while_it_runs_and_the_rest_when_dropped() {
+        let p = Progress::quiet();
+        let stage = p.stage("normals", Some(10_000), "points");
+        {
+            let mut t = stage.ticker();
+            for _ in 0..Ticker::BATCH - 1 {
+                t.tick();
+            }
+            assert_eq!(stage.done(), 0);
+            t.tick();
+            // The stage sees the batch before the item is finished.
+            assert_eq!(stage.done(), Ticker::BATCH);
+            for _ in 0..10 {
+                t.tick();
+            }
+            assert_eq!(stage.done(), Ticker::BATCH);
+        }
+        assert_eq!(stage.done(), Ticker::BATCH + 10);
+        stage.finish(None);
+    }
+
+    #[test]
+    fn stages_are_numbered_in_the_order_they_start() {
+        let p = Progress::quiet();
+        let a = p.stage("count", None, "points");
+        let b = p.stage("scatter", None, "points");
+        assert_eq!((a.clock.step, b.clock.step), (1, 2));
+        assert!(b.clock.run <= b.clock.stage);
     }
 }

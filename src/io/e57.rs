@@ -138,6 +138,10 @@ pub struct E57Meta {
     pub crs: Option<String>,
     /// The scans.
     pub scans: Vec<ScanMeta>,
+    /// Where the CRS contradicts the coordinates, as for LAS
+    /// ([`Crs::from_text`](crate::io::las_meta::Crs::from_text), then its warnings); filled by
+    /// `info`, which knows the points' bounds.
+    pub warnings: Vec<String>,
 }
 
 /// One scan of an E57 file.
@@ -201,6 +205,7 @@ pub fn file_meta(path: &Path) -> Result<E57Meta> {
             .filter(|c| !c.trim().is_empty())
             .map(str::to_string),
         scans,
+        warnings: Vec::new(),
     })
 }
 

@@ -90,6 +90,64 @@ impl Crs {
             parts.join(", ")
         }
     }
+
+    /// A CRS given as text, as E57's `coordinateMetadata` holds it: OGC WKT (a keyword and a
+    /// bracket, `PROJCS[…`), or an EPSG code (`EPSG:32610`, `urn:ogc:def:crs:EPSG::4326`).
+    /// A code is placed as projected or geographic where its range says which (UTM zones
+    /// 32601–32760 and 25828–25838, NAD83 UTM 26901–26923, and the common geographic
+    /// systems 4326, 4269, 4258, 4283, 4617, 4979); other codes and free text stay unknown,
+    /// and nothing is warned about them.
+    pub fn from_text(text: &str) -> Crs {
+        let t = text.trim();
+        let head: String = t
+            .chars()
+            .take_while(|c| c.is_ascii_alphanumeric() || *c == '_')
+            .collect();
+        if !head.is_empty() && t[head.len()..].trim_start().starts_with('[') {
+            return Crs {
+                wkt: Some(t.to_string()),
+                ..Crs::default()
+            };
+        }
+        let upper = t.to_ascii_uppercase();
+        let code = upper
+            .rfind("EPSG")
+            .map(|i| upper[i + 4..].trim_start_matches(|c: char| c == ':' || c.is_whitespace()))
+            .and_then(|rest| rest.parse::<u16>().ok());
+        let mut crs = Crs::default();
+        match code {
+            Some(c @ (32601..=32660 | 32701..=32760 | 25828..=25838 | 26901..=26923)) => {
+                crs.projected_epsg = Some(c)
+            }
+            Some(c @ (4326 | 4269 | 4258 | 4283 | 4617 | 4979)) => crs.geographic_epsg = Some(c),
+            _ => {}
+        }
+        crs
+    }
+
+    /// Warnings where the CRS contradicts the points' bounds `min`..`max` (module docs).
+    pub fn warnings(&self, min: [f64; 3], max: [f64; 3]) -> Vec<String> {
+        let mut w = Vec::new();
+        if !(min.iter().chain(&max).all(|v| v.is_finite())) {
+            return w;
+        }
+        let big_x = min[0].abs().max(max[0].abs());
+        let big_y = min[1].abs().max(max[1].abs());
+        match self.geographic() {
+            Some(true) if big_x > 180.0 || big_y > 90.0 => w.push(format!(
+                "the CRS ({}) is geographic, in degrees, but the points reach x = {big_x}, y = {big_y}, beyond ±180 and ±90",
+                self.summary()
+            )),
+            Some(false) if big_x <= 180.0 && big_y <= 90.0 && max[0] - min[0] < 5.0 => {
+                w.push(format!(
+                    "the CRS ({}) is projected, but every point lies within longitude and latitude values (|x| <= 180, |y| <= 90) over a few units: are the coordinates degrees?",
+                    self.summary()
+                ))
+            }
+            _ => {}
+        }
+        w
+    }
 }
 
 /// The GeoTIFF code for a user-defined system.
@@ -156,26 +214,7 @@ impl LasMeta {
 
     /// Warnings where the CRS contradicts the points' bounds `min`..`max` (module docs).
     pub fn warnings(&self, min: [f64; 3], max: [f64; 3]) -> Vec<String> {
-        let mut w = Vec::new();
-        if !(min.iter().chain(&max).all(|v| v.is_finite())) {
-            return w;
-        }
-        let big_x = min[0].abs().max(max[0].abs());
-        let big_y = min[1].abs().max(max[1].abs());
-        match self.crs.geographic() {
-            Some(true) if big_x > 180.0 || big_y > 90.0 => w.push(format!(
-                "the CRS ({}) is geographic, in degrees, but the points reach x = {big_x}, y = {big_y}, beyond ±180 and ±90",
-                self.crs.summary()
-            )),
-            Some(false) if big_x <= 180.0 && big_y <= 90.0 && max[0] - min[0] < 5.0 => {
-                w.push(format!(
-                    "the CRS ({}) is projected, but every point lies within longitude and latitude values (|x| <= 180, |y| <= 90) over a few units: are the coordinates degrees?",
-                    self.crs.summary()
-                ))
-            }
-            _ => {}
-        }
-        w
+        self.crs.warnings(min, max)
     }
 }
 
@@ -304,6 +343,39 @@ mod tests {
         let mut short = Crs::default();
         geo_keys(&data[..13], &mut short);
         assert!(short.is_empty());
+    }
+
+    #[test]
+    fn a_crs_as_text_is_wkt_or_an_epsg_code() {
+        let w = Crs::from_text(" PROJCS[\"NAD83 / UTM zone 10N\",GEOGCS[\"NAD83\"]]");
+        assert_eq!(w.name(), Some("NAD83 / UTM zone 10N"));
+        assert_eq!(w.geographic(), Some(false));
+        assert_eq!(
+            Crs::from_text("GEOGCRS [\"WGS 84\"]").geographic(),
+            Some(true)
+        );
+        let utm = Crs::from_text("EPSG:32610");
+        assert_eq!(utm.projected_epsg, Some(32610));
+        assert_eq!(utm.geographic(), Some(false));
+        let wgs = Crs::from_text("urn:ogc:def:crs:EPSG::4326");
+        assert_eq!(wgs.geographic_epsg, Some(4326));
+        assert_eq!(wgs.geographic(), Some(true));
+        // Codes of unknown kind and free text: nothing to check against.
+        for t in [
+            "EPSG:2056",
+            "site grid, metres",
+            "",
+            "EPSG:",
+            "EPSG:99999999",
+        ] {
+            let c = Crs::from_text(t);
+            assert_eq!(c.geographic(), None, "{t}");
+            assert!(c.warnings([1e6; 3], [2e6; 3]).is_empty(), "{t}");
+        }
+        assert!(
+            !wgs.warnings([636001.0, 848935.0, 0.0], [637179.0, 849497.0, 1.0])
+                .is_empty()
+        );
     }
 
     #[test]

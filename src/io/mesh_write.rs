@@ -79,6 +79,7 @@ use std::io::{BufReader, BufWriter, Read, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 
 use super::atomic::{self, AtomicFile, with_suffix};
+use super::islands::IslandFilter;
 use crate::error::{Error, IoContext, Result};
 use crate::synth::vec::{cross, norm, sub};
 
@@ -232,7 +233,7 @@ impl VertexFormat {
 /// [`MeshFormat::for_path`]), whether its vertices get normals (`--out-normals`) and whether
 /// a picture of it is drawn as it streams ([`crate::io::preview`], of this many pixels a
 /// view's side).
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct MeshTarget {
     /// The output file.
     pub path: PathBuf,
@@ -242,6 +243,9 @@ pub struct MeshTarget {
     pub normals: bool,
     /// A preview's side in pixels, when one is drawn.
     pub preview: Option<usize>,
+    /// Connected pieces under this fraction of the area are left out
+    /// ([`MeshWriter::drop_islands`]).
+    pub islands: Option<f64>,
 }
 
 impl MeshTarget {
@@ -252,6 +256,7 @@ impl MeshTarget {
             format: MeshFormat::Ply,
             normals: false,
             preview: None,
+            islands: None,
         }
     }
 }
@@ -288,6 +293,10 @@ pub struct MeshWriter {
     vertices: u64,
     faces_written: u64,
     normals_given: u64,
+    /// Drop the connected pieces under this fraction of the area ([`crate::io::islands`]).
+    islands: Option<f64>,
+    /// What is kept, once `finish` has found the islands.
+    filter: Option<IslandFilter>,
 }
 
 /// A staged temporary file: written once, then read in as many passes as needed.
@@ -510,6 +519,8 @@ impl MeshWriter {
             vertices: 0,
             faces_written: 0,
             normals_given: 0,
+            islands: None,
+            filter: None,
         };
         // From here on, a failure drops `w`, which removes the temporary files.
         w.verts = Stage::create(with_suffix(&tmp, ".vertices"))?;
@@ -527,6 +538,14 @@ impl MeshWriter {
             ..VertexFormat::default()
         };
         Self::create(path, MeshFormat::Ply, vf)
+    }
+
+    /// Leave out of the file every connected piece of the mesh whose area is under `ratio`
+    /// of the whole (PoissonRecon's SurfaceTrimmer `--aRatio`; [`crate::io::islands`]),
+    /// with its vertices. [`MeshWriter::finish`] then holds
+    /// [`islands::BYTES_PER_VERTEX`](crate::io::islands::BYTES_PER_VERTEX) per vertex.
+    pub fn drop_islands(&mut self, ratio: f64) {
+        self.islands = Some(ratio);
     }
 
     /// The final path of the file.
@@ -715,6 +734,26 @@ impl MeshWriter {
             }
             self.write_normals()?;
         }
+        if let Some(ratio) = self.islands {
+            let f = self.find_islands(ratio)?;
+            if f.triangles == 0 {
+                return Err(Error::Usage(format!(
+                    "{}: dropping the pieces under {ratio} of the area leaves no triangle: each of its {} pieces is smaller than that",
+                    self.final_path.display(),
+                    f.components
+                )));
+            }
+            log::info!(
+                "{}: dropped {} of {} connected pieces under {ratio} of the area ({} of {} triangles kept)",
+                self.final_path.display(),
+                f.dropped,
+                f.components,
+                f.triangles,
+                self.faces_written
+            );
+            self.filter = Some(f);
+        }
+        let (vertices, faces) = self.counts_out();
         let Some(mut out) = self.out.take() else {
             return Err(Error::Internal(format!(
                 "{}: mesh writer finished twice",
@@ -745,26 +784,84 @@ impl MeshWriter {
         self.faces.remove();
         self.normals.remove();
         Ok(MeshWriteStats {
-            vertices: self.vertices,
-            faces: self.faces_written,
+            vertices,
+            faces,
             bytes,
         })
     }
 
+    /// The vertices and triangles the file holds: all those staged, less the islands.
+    fn counts_out(&self) -> (u64, u64) {
+        match &self.filter {
+            Some(f) => (f.vertices, f.triangles),
+            None => (self.vertices, self.faces_written),
+        }
+    }
+
+    /// The pieces of the staged mesh under `ratio` of its area.
+    fn find_islands(&mut self, ratio: f64) -> Result<IslandFilter> {
+        let map = self.map_vertices()?;
+        let n = u32::try_from(self.vertices).map_err(|_| {
+            Error::Usage(format!(
+                "{}: {} vertices; islands are found among at most {} (32-bit indices)",
+                self.final_path.display(),
+                self.vertices,
+                u32::MAX
+            ))
+        })?;
+        let pos = |i: u32| {
+            let o = i as usize * STAGE_BYTES;
+            Staged::decode(&map[o..o + STAGE_BYTES]).p
+        };
+        let (faces, count) = (&mut self.faces, self.faces_written);
+        IslandFilter::new(
+            n,
+            pos,
+            |f: &mut dyn FnMut([u32; 3])| {
+                stream_faces(faces, count, |t| {
+                    f(t);
+                    Ok(())
+                })
+            },
+            ratio,
+        )
+    }
+
+    /// The staged vertices, mapped (complete, no longer written: this writer's own file,
+    /// which nothing else truncates while the map lives).
+    fn map_vertices(&mut self) -> Result<super::mmap::Window> {
+        self.verts.close()?;
+        let vpath = self.verts.path.clone();
+        let verts = File::open(&vpath).with_path(&vpath)?;
+        let len = verts.metadata().with_path(&vpath)?.len();
+        let map = super::mmap::Window::map(&verts, &vpath, 0, len)?;
+        if map.len() as u64 != self.vertices * STAGE_BYTES as u64 {
+            return Err(Error::Internal(format!(
+                "{}: {} bytes staged for {} vertices",
+                vpath.display(),
+                map.len(),
+                self.vertices
+            )));
+        }
+        Ok(map)
+    }
+
     /// The size of a binary file, known from the counts.
     fn expected_bytes(&self) -> Option<u64> {
+        let (vertices, faces) = self.counts_out();
         match self.format {
             MeshFormat::Ply => Some(
                 header_bytes(self.vf) as u64
-                    + self.vertices * self.vf.stride() as u64
-                    + self.faces_written * FACE_BYTES,
+                    + vertices * self.vf.stride() as u64
+                    + faces * FACE_BYTES,
             ),
-            MeshFormat::Stl => Some(STL_HEADER as u64 + 4 + self.faces_written * STL_TRIANGLE),
+            MeshFormat::Stl => Some(STL_HEADER as u64 + 4 + faces * STL_TRIANGLE),
             _ => None,
         }
     }
 
-    /// Each staged vertex with its normal (zero without normals), in order.
+    /// Each vertex written with its normal (zero without normals), in order: every staged
+    /// one but those of dropped islands.
     fn each_vertex(&mut self, mut f: impl FnMut(Staged, [f32; 3]) -> Result<()>) -> Result<()> {
         let mut verts = self.verts.reader()?;
         let mut normals = match self.vf.normals {
@@ -773,7 +870,7 @@ impl MeshWriter {
         };
         let mut rec = [0u8; STAGE_BYTES];
         let mut nrec = [0u8; 12];
-        for _ in 0..self.vertices {
+        for i in 0..self.vertices {
             verts.read_exact(&mut rec).with_path(&self.verts.path)?;
             let mut n = [0f32; 3];
             if let Some(r) = normals.as_mut() {
@@ -782,25 +879,32 @@ impl MeshWriter {
                     n[d] = f32::from_le_bytes(nrec[4 * d..4 * d + 4].try_into().expect("4"));
                 }
             }
-            f(Staged::decode(&rec), n)?;
+            if self.filter.as_ref().is_none_or(|k| k.keeps(i as u32)) {
+                f(Staged::decode(&rec), n)?;
+            }
         }
         Ok(())
     }
 
-    /// Each staged face, in order.
-    fn each_face(&mut self, mut f: impl FnMut([u32; 3]) -> Result<()>) -> Result<()> {
-        let mut faces = self.faces.reader()?;
-        let mut rec = [0u8; STAGE_FACE_BYTES];
-        for _ in 0..self.faces_written {
-            faces.read_exact(&mut rec).with_path(&self.faces.path)?;
-            f([0, 1, 2].map(|k| u32::from_le_bytes(rec[4 * k..4 * k + 4].try_into().expect("4"))))?;
-        }
-        Ok(())
+    /// Each face written, in order: every staged one but those of dropped islands, its
+    /// corners numbered as written (`renumber`) or as staged.
+    fn each_face(
+        &mut self,
+        renumber: bool,
+        mut f: impl FnMut([u32; 3]) -> Result<()>,
+    ) -> Result<()> {
+        let filter = &self.filter;
+        stream_faces(&mut self.faces, self.faces_written, |t| match filter {
+            Some(k) if !k.keeps(t[0]) => Ok(()),
+            Some(k) if renumber => f(t.map(|v| k.renumber(v))),
+            _ => f(t),
+        })
     }
 
     fn write_ply_binary(&mut self, w: &mut impl Write) -> Result<()> {
         let (vf, tmp) = (self.vf, self.tmp_path.clone());
-        w.write_all(header(self.vertices, self.faces_written, vf).as_bytes())
+        let (vertices, faces) = self.counts_out();
+        w.write_all(header(vertices, faces, vf).as_bytes())
             .with_path(&tmp)?;
         let mut rec = Vec::with_capacity(vf.stride());
         self.each_vertex(|v, n| {
@@ -828,7 +932,7 @@ impl MeshWriter {
             }
             w.write_all(&rec).with_path(&tmp)
         })?;
-        self.each_face(|t| {
+        self.each_face(true, |t| {
             let mut r = [0u8; FACE_BYTES as usize];
             r[0] = 3;
             for k in 0..3 {
@@ -840,7 +944,8 @@ impl MeshWriter {
 
     fn write_ply_ascii(&mut self, w: &mut impl Write) -> Result<()> {
         let (vf, tmp) = (self.vf, self.tmp_path.clone());
-        let (h, t) = header_parts(self.vertices, self.faces_written, vf, true);
+        let (vertices, faces) = self.counts_out();
+        let (h, t) = header_parts(vertices, faces, vf, true);
         w.write_all(h.as_bytes()).with_path(&tmp)?;
         w.write_all(t.as_bytes()).with_path(&tmp)?;
         let mut line = String::new();
@@ -873,15 +978,17 @@ impl MeshWriter {
             line.push('\n');
             w.write_all(line.as_bytes()).with_path(&tmp)
         })?;
-        self.each_face(|[a, b, c]| writeln!(w, "3 {a} {b} {c}").with_path(&tmp))
+        self.each_face(true, |[a, b, c]| {
+            writeln!(w, "3 {a} {b} {c}").with_path(&tmp)
+        })
     }
 
     fn write_obj(&mut self, w: &mut impl Write) -> Result<()> {
         let (vf, tmp) = (self.vf, self.tmp_path.clone());
+        let (vertices, faces) = self.counts_out();
         writeln!(
             w,
-            "# written by scanflow\n# {} vertices, {} triangles",
-            self.vertices, self.faces_written
+            "# written by scanflow\n# {vertices} vertices, {faces} triangles"
         )
         .with_path(&tmp)?;
         let mut line = String::new();
@@ -915,7 +1022,7 @@ impl MeshWriter {
             })?;
         }
         let normals = vf.normals;
-        self.each_face(|t| {
+        self.each_face(true, |t| {
             let [a, b, c] = t.map(|i| u64::from(i) + 1);
             if normals {
                 writeln!(w, "f {a}//{a} {b}//{b} {c}//{c}").with_path(&tmp)
@@ -927,11 +1034,11 @@ impl MeshWriter {
 
     fn write_stl(&mut self, w: &mut impl Write) -> Result<()> {
         let tmp = self.tmp_path.clone();
-        let Ok(count) = u32::try_from(self.faces_written) else {
+        let faces = self.counts_out().1;
+        let Ok(count) = u32::try_from(faces) else {
             return Err(Error::Usage(format!(
-                "{}: {} triangles; binary STL counts at most {} (write *.ply)",
+                "{}: {faces} triangles; binary STL counts at most {} (write *.ply)",
                 self.final_path.display(),
-                self.faces_written,
                 u32::MAX
             )));
         };
@@ -940,26 +1047,14 @@ impl MeshWriter {
         head[..title.len()].copy_from_slice(title);
         w.write_all(&head).with_path(&tmp)?;
         w.write_all(&count.to_le_bytes()).with_path(&tmp)?;
-        self.verts.close()?;
-        let vpath = self.verts.path.clone();
-        let verts = File::open(&vpath).with_path(&vpath)?;
-        // SAFETY: the staged vertex file is this writer's own temporary file, complete and
-        // no longer written; nothing else maps or truncates it while the map lives.
-        let map = unsafe { memmap2::Mmap::map(&verts) }.with_path(&vpath)?;
-        if map.len() as u64 != self.vertices * STAGE_BYTES as u64 {
-            return Err(Error::Internal(format!(
-                "{}: {} bytes staged for {} vertices",
-                vpath.display(),
-                map.len(),
-                self.vertices
-            )));
-        }
+        let map = self.map_vertices()?;
         let corner = |i: u32| {
             let o = i as usize * STAGE_BYTES;
             Staged::decode(&map[o..o + STAGE_BYTES]).p.map(|x| x as f32)
         };
         let path = self.final_path.clone();
-        self.each_face(|t| {
+        // Corners are looked up by their staged numbers.
+        self.each_face(false, |t| {
             let p = t.map(corner);
             if p.iter().flatten().any(|x| !x.is_finite()) {
                 return Err(Error::Usage(format!(
@@ -975,6 +1070,21 @@ impl MeshWriter {
             w.write_all(&r).with_path(&tmp)
         })
     }
+}
+
+/// The `count` staged faces of `stage`, in order.
+fn stream_faces(
+    stage: &mut Stage,
+    count: u64,
+    mut f: impl FnMut([u32; 3]) -> Result<()>,
+) -> Result<()> {
+    let mut faces = stage.reader()?;
+    let mut rec = [0u8; STAGE_FACE_BYTES];
+    for _ in 0..count {
+        faces.read_exact(&mut rec).with_path(&stage.path)?;
+        f([0, 1, 2].map(|k| u32::from_le_bytes(rec[4 * k..4 * k + 4].try_into().expect("4"))))?;
+    }
+    Ok(())
 }
 
 /// The unit normal of triangle `p` (counter-clockwise seen from its front), zero where it has
@@ -1328,6 +1438,109 @@ mod tests {
             w.normal(i, n).unwrap();
         }
         w.finish().unwrap()
+    }
+
+    /// A tetrahedron a hundredth the size (vertices 0–3), the unit one (4–7), a lone vertex
+    /// (8): with islands under 1% of the area dropped, every format holds exactly the unit
+    /// tetrahedron, renumbered from 0, with its own normals and colours.
+    #[test]
+    fn dropped_islands_leave_every_format_with_the_large_piece() {
+        let dir = tempfile::tempdir().unwrap();
+        let vf = VertexFormat {
+            color: true,
+            normals: true,
+            ..VertexFormat::default()
+        };
+        for (name, format) in [
+            ("a.ply", MeshFormat::Ply),
+            ("b.ply", MeshFormat::PlyAscii),
+            ("c.obj", MeshFormat::Obj),
+            ("d.stl", MeshFormat::Stl),
+        ] {
+            let path = dir.path().join(name);
+            let vf = VertexFormat {
+                normals: format != MeshFormat::Stl,
+                ..vf
+            };
+            let mut w = MeshWriter::create(&path, format, vf).unwrap();
+            w.drop_islands(0.01);
+            let small = TETRA.map(|p| p.map(|x| 5.0 + 0.01 * x));
+            for (k, p) in small.iter().chain(&TETRA).enumerate() {
+                w.vertex(*p, Some([k as u8, 0, 0])).unwrap();
+            }
+            w.vertex([9.0; 3], Some([8, 0, 0])).unwrap();
+            for base in [0, 4] {
+                for t in TETRA_FACES {
+                    w.triangle(t.map(|i| i + base)).unwrap();
+                }
+            }
+            if vf.normals {
+                for i in 0..9 {
+                    w.normal(i, [0.0, 0.0, i as f32]).unwrap();
+                }
+            }
+            let st = w.finish().unwrap();
+            assert_eq!(st.bytes, std::fs::metadata(&path).unwrap().len(), "{name}");
+            assert_eq!(st.faces, 4, "{name}");
+            let m = crate::io::mesh_read::read_any_mesh(&path).unwrap();
+            if format == MeshFormat::Stl {
+                // STL's reader numbers corners as they come.
+                let corners: Vec<[f64; 3]> = m
+                    .triangles
+                    .iter()
+                    .flat_map(|t| t.map(|i| m.vertices[i as usize]))
+                    .collect();
+                let want: Vec<[f64; 3]> = TETRA_FACES
+                    .iter()
+                    .flat_map(|t| t.map(|i| TETRA[i as usize]))
+                    .collect();
+                assert_eq!(corners, want);
+                continue;
+            }
+            assert_eq!(m.vertices, TETRA.to_vec(), "{name}");
+            assert_eq!(
+                m.triangles,
+                TETRA_FACES.map(|t| t.map(|i| i as u32)).to_vec(),
+                "{name}"
+            );
+            if format == MeshFormat::Ply {
+                assert_eq!(st.vertices, 4);
+                let bytes = std::fs::read(&path).unwrap();
+                let hb = header_bytes(vf);
+                assert!(
+                    std::str::from_utf8(&bytes[..hb])
+                        .unwrap()
+                        .contains("element vertex 4\n")
+                );
+                // The first vertex written is staged vertex 4: its normal and colour.
+                let rec = &bytes[hb..hb + vf.stride()];
+                assert_eq!(f32::from_le_bytes(rec[20..24].try_into().unwrap()), 4.0);
+                assert_eq!(rec[24], 4);
+                plyfile_check(&path, 4, 4);
+            }
+        }
+        assert_eq!(names(dir.path()), ["a.ply", "b.ply", "c.obj", "d.stl"]);
+    }
+
+    #[test]
+    fn islands_that_leave_nothing_are_refused_and_nothing_is_written() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("n.ply");
+        let mut w = MeshWriter::ply(&path, false).unwrap();
+        w.drop_islands(0.6);
+        for base in [0.0, 3.0] {
+            for p in TETRA {
+                w.vertex(p.map(|x| x + base), None).unwrap();
+            }
+        }
+        for base in [0, 4] {
+            for t in TETRA_FACES {
+                w.triangle(t.map(|i| i + base)).unwrap();
+            }
+        }
+        let e = w.finish().unwrap_err().to_string();
+        assert!(e.contains("n.ply") && e.contains("2 pieces"), "{e}");
+        assert!(names(dir.path()).is_empty());
     }
 
     #[test]

@@ -42,6 +42,7 @@ pub mod atomic;
 pub mod conf;
 pub mod e57;
 pub mod iges;
+pub mod islands;
 pub mod las;
 pub mod las_meta;
 pub mod mesh_read;

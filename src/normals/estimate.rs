@@ -15,6 +15,7 @@
 use nalgebra::{Matrix3, Vector3};
 
 use super::{MAX_K_FACTOR, NormalParams, ORIENT_K, TARGET_ANGLE};
+use crate::exec::progress::Stage;
 use crate::types::Aabb;
 
 /// Points of a cell sampled to measure its noise ([`cell_k`]).
@@ -107,7 +108,8 @@ pub fn cell_k(rel: &[[f32; 3]], k: usize) -> usize {
 /// Fit the points `pos` of a cell with box `bx` among themselves. A point whose k-th
 /// neighbour distance `d_k` exceeds its distance `b` to the box faces may have neighbours in
 /// other cells: it is left for [`fit_boundary`], and the halo must reach `d_k − b` past the box.
-pub fn fit_own(pos: &[[f64; 3]], bx: &Aabb, params: &NormalParams) -> OwnFit {
+/// Each point looked at is counted in `done` as it is, so progress moves inside a big cell.
+pub fn fit_own(pos: &[[f64; 3]], bx: &Aabb, params: &NormalParams, done: &Stage) -> OwnFit {
     let centre = [0, 1, 2].map(|a| 0.5 * (bx.min[a] + bx.max[a]));
     let edge = bx.max[0] - bx.min[0];
     let n = pos.len();
@@ -126,7 +128,9 @@ pub fn fit_own(pos: &[[f64; 3]], bx: &Aabb, params: &NormalParams) -> OwnFit {
     let mut boundary = Vec::new();
     let mut h = 0f64;
     let all: Vec<u32> = (0..n as u32).collect();
+    let mut ticker = done.ticker();
     let typical = knn_all(&rel, &all, params.k, None, |i, nb| {
+        ticker.tick();
         let i = i as usize;
         let p = pos[i];
         let b = (0..3)
@@ -590,6 +594,26 @@ mod tests {
         assert!((least_eigenvector(&a).unwrap()[2].abs() - 1.0).abs() < 1e-12);
         assert!(least_eigenvector(&Matrix3::from_diagonal(&Vector3::new(1.0, 0.0, 0.0))).is_none());
         assert!(least_eigenvector(&Matrix3::zeros()).is_none());
+    }
+
+    #[test]
+    fn a_cell_fit_counts_its_points_as_it_goes() {
+        use crate::exec::progress::{Progress, Ticker};
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(5);
+        let n = 3 * Ticker::BATCH as usize + 17;
+        let pos: Vec<[f64; 3]> = (0..n)
+            .map(|_| [rng.random::<f64>(), rng.random::<f64>(), 0.5])
+            .collect();
+        let bx = Aabb {
+            min: [0.0; 3],
+            max: [1.0; 3],
+        };
+        let progress = Progress::quiet();
+        let stage = progress.stage("normals", Some(n as u64), "points");
+        let f = fit_own(&pos, &bx, &NormalParams::default(), &stage);
+        assert_eq!(stage.done(), n as u64);
+        assert_eq!(f.normals.len(), n);
     }
 
     #[test]

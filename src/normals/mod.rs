@@ -277,7 +277,7 @@ fn fit_cells(
         let firsts: Vec<OwnFit> = ctx.pool.install(|| {
             ids.par_iter()
                 .zip(&own)
-                .map(|(&c, pts)| estimate::fit_own(&pts.pos, &cell_boxes[c], params))
+                .map(|(&c, pts)| estimate::fit_own(&pts.pos, &cell_boxes[c], params, &stage))
                 .collect()
         });
         // b) halos.
@@ -302,7 +302,6 @@ fn fit_cells(
         for r in res {
             results.push(r?);
         }
-        stage.inc(cells[i..j].iter().map(|c| c.count).sum());
         i = j;
     }
     stage.finish(None);
@@ -470,14 +469,17 @@ fn rewrite_cells(store: &mut Staged, side_dir: &Path, signs: &Signs, ctx: &Ctx) 
         let done: Vec<Result<(u64, u32)>> = ctx.pool.install(|| {
             (i..j)
                 .into_par_iter()
-                .map(|c| rewrite_cell(st, c, side_dir, signs))
+                .map(|c| {
+                    let r = rewrite_cell(st, c, side_dir, signs);
+                    stage.inc(1);
+                    r
+                })
                 .collect()
         });
         for (c, d) in (i..j).zip(done) {
             let (bytes, crc) = d?;
             store.set_cell_file(c, bytes, crc);
         }
-        stage.inc((j - i) as u64);
         i = j;
     }
     stage.finish(None);

@@ -170,11 +170,11 @@ pub fn merge(work: &Path, out: &MeshTarget, ctx: &Ctx) -> Result<MergeStats> {
         });
         for (&t, m) in wave.iter().zip(meshes) {
             sink.add(t, &m?)?;
+            stage.inc(1);
         }
-        stage.inc(wave.len() as u64);
     }
     stage.finish(None);
-    let ts = sink.finish(&d.input, d.iso, d.plan.depth)?;
+    let ts = sink.finish(&d.input, d.iso, d.plan.depth, ctx)?;
     Ok(MergeStats {
         vertices: ts.vertices,
         faces: ts.faces,

@@ -154,11 +154,8 @@ impl<'a> PointSource<'a> {
     }
 
     fn load(&self, i: usize) -> Result<SortedCell> {
-        let b = self.store.read_cell(i)?;
-        let mut b = b;
-        if self.plan.confidence {
-            super::reconstruct::weigh_by_confidence(&mut b);
-        }
+        let mut b = self.store.read_cell(i)?;
+        super::reconstruct::weigh_normals(&mut b, self.plan.confidence);
         Ok(SortedCell::new(b, &self.plan.cube, self.plan.leaf_level))
     }
 

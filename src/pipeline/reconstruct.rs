@@ -72,7 +72,7 @@ pub struct ReconParams {
     /// Drop the triangles whose corners' mean sampling density is below this (input points
     /// per square unit): PoissonRecon's trimming by density, as a threshold.
     pub trim_density: Option<f64>,
-    /// Weigh each sample's normal by its confidence ([`weigh_by_confidence`]).
+    /// Weigh each sample's normal by its confidence ([`weigh_normals`]).
     pub confidence: bool,
     /// Refine a leaf only where it holds at least this many samples per fine voxel of a
     /// surface crossing it (PoissonRecon's `--samplesPerNode`): see
@@ -315,22 +315,38 @@ pub fn reconstruct(
     })
 }
 
-/// Scale each point's normal by its confidence (clamped to [0, 1]): the normal field is a
-/// confidence-weighted density of the samples' normals, as with PoissonRecon's
-/// `--confidence`, so samples a scanner trusts less (grazing angles, far ranges) pull the
-/// surface less where better ones overlap them. The screening term and the iso-value keep
-/// unit weights. A batch without confidences is left as it is.
-pub fn weigh_by_confidence(b: &mut PointBatch) {
-    if b.confidence.len() != b.normal.len() {
+/// The samples' normals as the normal field weighs them, as PoissonRecon does:
+///
+/// - without `confidence`, unit normals: every sample counts once, however long the normals
+///   a file carries;
+/// - with `confidence` and a confidence per point (a PLY `confidence` property), unit normals
+///   times the confidence clamped to [0, 1] (a non-finite one counts 0);
+/// - with `confidence` and no such property, the normals as the inputs give them: their
+///   lengths are the confidences (PoissonRecon's `--confidence` convention).
+///
+/// So samples a scanner trusts less (grazing angles, far ranges) pull the surface less where
+/// better ones overlap them. The screening term and the iso-value keep unit weights.
+pub fn weigh_normals(b: &mut PointBatch, confidence: bool) {
+    let by_property = confidence && b.confidence.len() == b.normal.len();
+    if confidence && !by_property {
         return;
     }
-    for (n, &c) in b.normal.iter_mut().zip(&b.confidence) {
-        let w = if c.is_finite() {
-            c.clamp(0.0, 1.0)
+    for (i, n) in b.normal.iter_mut().enumerate() {
+        let w = if by_property {
+            let c = b.confidence[i];
+            if c.is_finite() {
+                c.clamp(0.0, 1.0)
+            } else {
+                0.0
+            }
         } else {
-            0.0
+            1.0
         };
-        *n = n.map(|x| x * w);
+        let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+        // Readers refuse zero normals; a zero one would splat nothing either way.
+        if len > 0.0 {
+            *n = n.map(|x| x * (w / len));
+        }
     }
 }
 
@@ -352,10 +368,10 @@ fn plan_run(store: &Store, params: &ReconParams, ctx: &Ctx) -> Result<Plan> {
             ),
         ));
     }
-    if params.confidence && !m.attributes.confidence {
+    if params.confidence && !m.attributes.confidence && m.estimated_normals.is_some() {
         return Err(Error::input(
             &store.dir,
-            "--confidence: the points carry no confidence (a PLY vertex property \"confidence\"), so there is nothing to weigh them by",
+            "--confidence: the points carry no confidence (a PLY vertex property \"confidence\") and their normals were estimated (unit length), so there is nothing to weigh them by",
         ));
     }
     let mut plan = Plan::new(
@@ -467,9 +483,7 @@ fn coarse_pass(store: &Store, plan: &Plan, weight: PointWeight, ctx: &Ctx) -> Re
                 .map(|&j| {
                     let mut b = store.read_cell(j)?;
                     let st = NoiseStats::of(&b.pos, &b.normal, plan.cube.origin, plan.spacing);
-                    if plan.confidence {
-                        weigh_by_confidence(&mut b);
-                    }
+                    weigh_normals(&mut b, plan.confidence);
                     Ok((b, st))
                 })
                 .collect()
@@ -628,6 +642,7 @@ fn leaf_pass(
                         .map(|(k, p)| {
                             let d = refine_leaf(plan, unit, &solvers, *k, p, coarse, &rule);
                             write_leaf(&dirs.leaves, *k, &d)?;
+                            stage.inc(1);
                             Ok(d)
                         })
                         .collect::<Vec<_>>()
@@ -639,7 +654,6 @@ fn leaf_pass(
                 solved += d.detail.is_some() as usize;
                 outcomes[i] = Some((d.iso_sum, d.iso_count, d.detail.is_some()));
             }
-            stage.inc(wave_idx.len() as u64);
         }
     }
     // The leaves solved before (a resumed run) or by other shards: from their checkpoints'

@@ -359,11 +359,14 @@ pub(super) fn pass1(
                         w
                     },
                     |w, ((c, b), (plan, (hp, hn)))| {
-                        cell::fit_cell(&b.pos, &b.normal, hp, hn, plan, treat, w, |k, w| {
-                            if let Some(raw) = raw {
-                                raw(*c, k, w)
-                            }
-                        })
+                        let f =
+                            cell::fit_cell(&b.pos, &b.normal, hp, hn, plan, treat, w, |k, w| {
+                                if let Some(raw) = raw {
+                                    raw(*c, k, w)
+                                }
+                            });
+                        stage.inc(b.pos.len() as u64);
+                        f
                     },
                 )
                 .collect()
@@ -390,7 +393,6 @@ pub(super) fn pass1(
             reach.push((*c, CellReach::of(&f.patches)));
             inspect(*c, b, f)?;
         }
-        stage.inc(entries[i..j].iter().map(|e| e.count).sum());
         i = j;
     }
     reach.sort_by_key(|r| r.0);
@@ -689,6 +691,7 @@ pub fn resample(
                     let around = Around::new(all);
                     let (mut p, mut nn) = (Vec::new(), Vec::new());
                     let fb = cell::resample_cell(&around, &mine, scale, &mut p, &mut nn);
+                    stage.inc(store.manifest.cells[c].count);
                     ((p, nn), fb)
                 })
                 .collect()
@@ -706,7 +709,6 @@ pub fn resample(
             count += p.len() as u64;
             st.normal_fallback += fb;
         }
-        stage.inc(store.manifest.cells[i..j].iter().map(|e| e.count).sum());
         i = j;
     }
     stage.finish(None);

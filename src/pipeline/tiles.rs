@@ -16,6 +16,7 @@ use super::shard::Claims;
 use crate::error::{Error, Result};
 use crate::exec::Ctx;
 use crate::exec::budget::{Permit, Share};
+use crate::exec::progress::Stage;
 use crate::extract::cpu::McWorkspace;
 use crate::extract::field::BlendEval;
 use crate::extract::gpu::GpuExtractor;
@@ -186,9 +187,11 @@ pub fn run(
                         near_pts: &near_pts,
                         geom: &geom,
                     };
-                    extract_gpu(&shared, g, &mut gpu_totals, &ctx.pool)?
+                    let meshes = extract_gpu(&shared, g, &mut gpu_totals, &ctx.pool)?;
+                    stage.inc(wave_tiles.len() as u64);
+                    meshes
                 }
-                None => extract_cpu(job, &points, &loaded, &near_pts, &geom, &ctx.pool),
+                None => extract_cpu(job, &points, &loaded, &near_pts, &geom, &ctx.pool, &stage),
             };
             for m in meshes {
                 let (tt, mesh) = m?;
@@ -197,7 +200,6 @@ pub fn run(
                 }
                 tiles_done += 1;
             }
-            stage.inc(wave_tiles.len() as u64);
         }
     }
     if shard.is_split() {
@@ -210,7 +212,7 @@ pub fn run(
     Ok(match sink {
         Some(sink) => TileStats {
             tiles: tiles_done,
-            ..sink.finish(job.input, job.iso, job.params.depth)?
+            ..sink.finish(job.input, job.iso, job.params.depth, ctx)?
         },
         None => TileStats {
             vertices: 0,
@@ -269,6 +271,8 @@ pub(super) struct MeshSink {
     normals: Option<NormalSums>,
     /// The picture being drawn, with `--preview` or `--report`.
     preview: Option<Preview>,
+    /// Small islands are dropped when the mesh is written (`--trim-islands`).
+    islands: bool,
 }
 
 /// The area-weighted normals of the vertices whose triangles are not all welded yet.
@@ -355,8 +359,13 @@ impl MeshSink {
                 attrs.intensity,
             )
         };
+        let mut writer = MeshWriter::create(&out.path, out.format, format)?;
+        if let Some(r) = out.islands {
+            writer.drop_islands(r);
+        }
         Ok(MeshSink {
-            writer: std::cell::RefCell::new(MeshWriter::create(&out.path, out.format, format)?),
+            writer: std::cell::RefCell::new(writer),
+            islands: out.islands.is_some(),
             welder: Welder::new(),
             origin: plan.cube.origin,
             geom: GridGeom {
@@ -419,7 +428,7 @@ impl MeshSink {
 
     /// Complete the mesh: vertices, faces and the welder's largest frontier. A mesh without a
     /// triangle is an error naming `input` (nothing appears under the output's name).
-    pub(super) fn finish(self, input: &Path, iso: f64, depth: u32) -> Result<TileStats> {
+    pub(super) fn finish(self, input: &Path, iso: f64, depth: u32, ctx: &Ctx) -> Result<TileStats> {
         let mut writer = self.writer.into_inner();
         // Vertices whose last tiles held no surface are complete now.
         if let Some(mut sums) = self.normals {
@@ -435,6 +444,13 @@ impl MeshSink {
                 ),
             ));
         }
+        let _permit = match self.islands {
+            true => Some(ctx.budget.acquire(
+                crate::io::islands::BYTES_PER_VERTEX * writer.vertices(),
+                "the connected pieces of the mesh (--trim-islands)",
+            )?),
+            false => None,
+        };
         let ws = writer.finish()?;
         Ok(TileStats {
             vertices: ws.vertices,
@@ -728,6 +744,7 @@ fn extract_cpu(
     near_pts: &[Option<NearPoints>],
     geom: &GridGeom,
     pool: &rayon::ThreadPool,
+    stage: &Stage,
 ) -> Vec<Result<(u64, TileMesh)>> {
     let plan = job.plan;
     let own = pou::leaf_weights(plan.leaf_voxels as i64, plan.overlap_voxels as i64);
@@ -750,7 +767,9 @@ fn extract_cpu(
                     geom,
                     &mut mesh,
                 )?;
-                finish_tile(job, points, *tt, mesh, cp)
+                let done = finish_tile(job, points, *tt, mesh, cp);
+                stage.inc(1);
+                done
             })
             .collect()
     })

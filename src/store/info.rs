@@ -9,7 +9,7 @@ use rayon::prelude::*;
 
 use crate::error::Result;
 use crate::exec::Ctx;
-use crate::io::las_meta::{LasMeta, LasTally};
+use crate::io::las_meta::{Crs, LasMeta, LasTally};
 use crate::store::cell_file::batch_bounds;
 use crate::store::{CHUNK_BYTES_PER_POINT, MAX_CHUNK_POINTS};
 use crate::types::{Aabb, PointBatch};
@@ -33,7 +33,8 @@ pub struct FileInfo {
     /// warnings where the CRS contradicts the coordinates.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub las: Option<LasInfo>,
-    /// E57: the header, and every scan's pose and sensor.
+    /// E57: the header, every scan's pose and sensor, and warnings where the CRS contradicts
+    /// the coordinates.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub e57: Option<crate::io::e57::E57Meta>,
 }
@@ -101,7 +102,13 @@ pub fn file_info(path: &Path, ctx: &Ctx) -> Result<FileInfo> {
         invalid_points: invalid,
         las,
         e57: match r.format() {
-            crate::io::Format::E57 => Some(crate::io::e57::file_meta(path)?),
+            crate::io::Format::E57 => {
+                let mut m = crate::io::e57::file_meta(path)?;
+                if let Some(t) = &m.crs {
+                    m.warnings = Crs::from_text(t).warnings(bounds.min, bounds.max);
+                }
+                Some(m)
+            }
             _ => None,
         },
     })

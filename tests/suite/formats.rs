@@ -286,6 +286,127 @@ fn densities_follow_the_sampling_and_trim_by_a_threshold() {
     assert!(!head.contains("quality"), "{head}");
 }
 
+/// `--trim-islands` (PoissonRecon's `--aRatio`): a sphere beside a pebble a tenth its size,
+/// sampled as densely, reconstructs as two pieces (the pebble 1.1% of the area); with pieces
+/// under 2% of the area dropped, as the sphere
+/// alone, in `reconstruct` and in `merge` of a sharded run, which write the same bytes.
+/// trimesh (an independent reader) counts the pieces.
+#[test]
+fn small_islands_are_dropped_as_the_mesh_is_written() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let sphere = d.join("sphere.ply");
+    ok(&["synth", "sphere", "--points", "20000", "-o", s(&sphere)]);
+    let b = super::common::load(&sphere);
+    let mut text = String::new();
+    for (p, n) in b.pos.iter().zip(&b.normal) {
+        text.push_str(&format!(
+            "{} {} {} {} {} {}\n",
+            p[0], p[1], p[2], n[0], n[1], n[2]
+        ));
+    }
+    // The pebble: radius 0.1 at (2.2, 0, 0), every 100th sample of the sphere shrunk there.
+    for (p, n) in b.pos.iter().zip(&b.normal).step_by(100) {
+        let q = [2.2 + 0.1 * p[0], 0.1 * p[1], 0.1 * p[2]];
+        text.push_str(&format!(
+            "{} {} {} {} {} {}\n",
+            q[0], q[1], q[2], n[0], n[1], n[2]
+        ));
+    }
+    let n = b.pos.len() + b.pos.len().div_ceil(100);
+    let pts = d.join("pebble.ply");
+    std::fs::write(
+        &pts,
+        format!(
+            "ply\nformat ascii 1.0\nelement vertex {n}\nproperty double x\nproperty double y\nproperty double z\nproperty float nx\nproperty float ny\nproperty float nz\nend_header\n{text}"
+        ),
+    )
+    .unwrap();
+    let pieces = |mesh: &Path| {
+        let rep = ok(&["check", s(mesh), "--json"]);
+        let v: serde_json::Value = serde_json::from_str(&rep).unwrap();
+        (
+            v["check"]["components"].as_u64().unwrap(),
+            v["check"]["bounds"]["max"][0].as_f64().unwrap(),
+        )
+    };
+    let (both, alone) = (d.join("both.ply"), d.join("alone.ply"));
+    let at_depth_8 = |out: &Path, extra: &[&str]| {
+        let mut args = vec![
+            "reconstruct",
+            s(&pts),
+            "-o",
+            s(out),
+            "--depth",
+            "8",
+            "--progress",
+            "none",
+        ];
+        args.extend_from_slice(extra);
+        ok(&args);
+    };
+    at_depth_8(&both, &[]);
+    at_depth_8(&alone, &["--trim-islands", "0.02"]);
+    let (k, right) = pieces(&both);
+    assert!(k == 2 && right > 2.25, "{k} pieces up to x = {right}");
+    let (k, right) = pieces(&alone);
+    assert!(k == 1 && right < 1.01, "{k} pieces up to x = {right}");
+    // From a store: one process, and two shards and a merge (given PoissonRecon's name for
+    // the option), write the same bytes.
+    let store = d.join("store");
+    ok(&["ingest", s(&pts), "-o", s(&store), "--progress", "none"]);
+    let (single, merged, work) = (d.join("single.ply"), d.join("merged.ply"), d.join("work"));
+    let from_store = |out: &Path, extra: &[&str]| {
+        let mut args = vec!["reconstruct", s(&store), "-o", s(out), "--depth", "8"];
+        args.extend_from_slice(&["--progress", "none"]);
+        args.extend_from_slice(extra);
+        ok(&args);
+    };
+    from_store(&single, &["--trim-islands", "0.02"]);
+    for shard in ["0/2", "1/2"] {
+        from_store(&merged, &["--work-dir", s(&work), "--shard", shard]);
+    }
+    ok(&[
+        "merge",
+        s(&work),
+        "-o",
+        s(&merged),
+        "--aRatio",
+        "0.02",
+        "--progress",
+        "none",
+    ]);
+    assert_eq!(pieces(&single).0, 1);
+    assert_eq!(
+        std::fs::read(&merged).unwrap(),
+        std::fs::read(&single).unwrap()
+    );
+    if python_has("trimesh", "trim-islands") {
+        let o = Command::new("python3")
+            .args([
+                "-c",
+                "import sys, trimesh\nfor f in sys.argv[1:]: print(len(trimesh.load(f, process=False).split(only_watertight=False)))",
+                s(&both),
+                s(&alone),
+            ])
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        assert_eq!(String::from_utf8_lossy(&o.stdout), "2\n1\n");
+    }
+    for bad in ["1", "-0.1", "nan"] {
+        let e = usage(&[
+            "reconstruct",
+            s(&pts),
+            "-o",
+            s(&d.join("x.ply")),
+            "--trim-islands",
+            bad,
+        ]);
+        assert!(e.contains("--trim-islands"), "{e}");
+    }
+}
+
 /// Combinations no format can hold, and bad thresholds: usage errors naming the file or the
 /// option, before any work.
 #[test]
@@ -526,6 +647,25 @@ fn an_e57_of_six_posed_scans_reconstructs_the_sphere() {
         info.contains("scan 5") && info.contains("scanner at (0, 0, -50)"),
         "{info}"
     );
+    assert!(
+        info.contains("crs         (none recorded)") && !info.contains("warning"),
+        "{info}"
+    );
+    // A projected CRS given to points that span two units about the origin: `info` says the
+    // coordinates look like degrees, as it does for LAS.
+    let crs = d.join("crs.e57");
+    let o = Command::new("python3")
+        .args([script, s(&pts), s(&crs), "EPSG:32610"])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let info = ok(&["info", s(&crs)]);
+    assert!(info.contains("crs         EPSG:32610"), "{info}");
+    assert!(
+        info.contains("warning     the CRS (projected EPSG:32610) is projected")
+            && info.contains("degrees?"),
+        "{info}"
+    );
     let mesh = d.join("m.ply");
     recon(&e57, &mesh, &[]);
     let truth = d.join("sphere.truth.json");
@@ -565,8 +705,8 @@ fn an_e57_of_six_posed_scans_reconstructs_the_sphere() {
 
 /// A sphere whose +x half also holds noisy samples (spread 0.03, scattered normals) of
 /// confidence 0.05, beside the clean samples of confidence 1: at depth 8, `--confidence` brings the
-/// surface closer to the exact sphere than the unweighted solve. A file without confidences
-/// is refused before any work.
+/// surface closer to the exact sphere than the unweighted solve, whether the confidences are a
+/// property or the normals' lengths. A file with neither is refused before any work.
 #[test]
 fn confidence_weighting_lets_trusted_samples_win() {
     use rand::{Rng, SeedableRng};
@@ -581,38 +721,45 @@ fn confidence_weighting_lets_trusted_samples_win() {
         let (u, v): (f64, f64) = (rng.random_range(1e-12..1.0), rng.random());
         sd * (-2.0 * u.ln()).sqrt() * (2.0 * std::f64::consts::PI * v).cos()
     };
-    let mut text = String::new();
+    // The same samples twice: with a confidence property and unit normals, and with normals
+    // as long as the confidence (PoissonRecon's convention) and no property.
+    let (mut text, mut lengths) = (String::new(), String::new());
     let mut n = 0;
-    for (p, nn) in b.pos.iter().zip(&b.normal) {
+    let mut sample = |q: [f64; 3], m: [f64; 3], c: f64| {
+        let l = (m[0] * m[0] + m[1] * m[1] + m[2] * m[2]).sqrt();
+        let u = m.map(|x| x / l);
         text.push_str(&format!(
-            "{} {} {} {} {} {} 1\n",
-            p[0], p[1], p[2], nn[0], nn[1], nn[2]
+            "{} {} {} {} {} {} {c}\n",
+            q[0], q[1], q[2], u[0], u[1], u[2]
+        ));
+        lengths.push_str(&format!(
+            "{} {} {} {} {} {}\n",
+            q[0],
+            q[1],
+            q[2],
+            u[0] * c,
+            u[1] * c,
+            u[2] * c
         ));
         n += 1;
+    };
+    for (p, nn) in b.pos.iter().zip(&b.normal) {
+        sample(*p, nn.map(f64::from), 1.0);
         if p[0] > 0.0 {
             let q = p.map(|x| x + gauss(0.03));
             let m = nn.map(|x| x as f64 + gauss(0.3));
-            let l = (m[0] * m[0] + m[1] * m[1] + m[2] * m[2]).sqrt();
-            text.push_str(&format!(
-                "{} {} {} {} {} {} 0.05\n",
-                q[0],
-                q[1],
-                q[2],
-                m[0] / l,
-                m[1] / l,
-                m[2] / l
-            ));
-            n += 1;
+            sample(q, m, 0.05);
         }
     }
-    let pts = d.join("mixed.ply");
-    std::fs::write(
-        &pts,
+    let head = |n: usize, confidence: &str| {
         format!(
-            "ply\nformat ascii 1.0\nelement vertex {n}\nproperty double x\nproperty double y\nproperty double z\nproperty float nx\nproperty float ny\nproperty float nz\nproperty float confidence\nend_header\n{text}"
-        ),
-    )
-    .unwrap();
+            "ply\nformat ascii 1.0\nelement vertex {n}\nproperty double x\nproperty double y\nproperty double z\nproperty float nx\nproperty float ny\nproperty float nz\n{confidence}end_header\n"
+        )
+    };
+    let pts = d.join("mixed.ply");
+    std::fs::write(&pts, head(n, "property float confidence\n") + &text).unwrap();
+    let long = d.join("lengths.ply");
+    std::fs::write(&long, head(n, "") + &lengths).unwrap();
     let truth = d.join("clean.truth.json");
     let mean = |mesh: &Path| {
         let rep = ok(&["check", s(mesh), "--truth", s(&truth), "--json"]);
@@ -622,10 +769,10 @@ fn confidence_weighting_lets_trusted_samples_win() {
             .unwrap()
     };
     let (plain, weighted) = (d.join("plain.ply"), d.join("weighted.ply"));
-    let at_depth_8 = |out: &Path, extra: &[&str]| {
+    let at_depth_8 = |pts: &Path, out: &Path, extra: &[&str]| {
         let mut args = vec![
             "reconstruct",
-            s(&pts),
+            s(pts),
             "-o",
             s(out),
             "--depth",
@@ -636,19 +783,34 @@ fn confidence_weighting_lets_trusted_samples_win() {
         args.extend_from_slice(extra);
         ok(&args);
     };
-    at_depth_8(&plain, &[]);
-    at_depth_8(&weighted, &["--confidence"]);
+    at_depth_8(&pts, &plain, &[]);
+    at_depth_8(&pts, &weighted, &["--confidence"]);
     let (a, b) = (mean(&plain), mean(&weighted));
     eprintln!("mean distance to the sphere: unweighted {a:.3e}, weighted {b:.3e}");
     assert!(b < 0.7 * a, "unweighted {a:e}, weighted {b:e}");
+    // Normal lengths as confidences: weighted as by the property; without --confidence the
+    // lengths are ignored (every normal counts as unit), as for the unit normals.
+    let (plain_l, weighted_l) = (d.join("plain_l.ply"), d.join("weighted_l.ply"));
+    at_depth_8(&long, &plain_l, &[]);
+    at_depth_8(&long, &weighted_l, &["--confidence"]);
+    let (al, bl) = (mean(&plain_l), mean(&weighted_l));
+    eprintln!("normal lengths as confidences: unweighted {al:.3e}, weighted {bl:.3e}");
+    assert!((al / a - 1.0).abs() < 0.02, "unweighted {a:e} and {al:e}");
+    assert!((bl / b - 1.0).abs() < 0.05, "weighted {b:e} and {bl:e}");
+    // Estimated normals have unit length: with no property there is nothing to weigh by.
     let e = usage(&[
         "reconstruct",
         s(&clean),
         "-o",
         s(&d.join("x.ply")),
         "--confidence",
+        "--normals",
+        "estimate",
     ]);
-    assert!(e.contains("clean.ply") && e.contains("confidence"), "{e}");
+    assert!(
+        e.contains("clean.ply") && e.contains("confidence") && e.contains("no normals"),
+        "{e}"
+    );
 }
 
 /// `--samples-per-node` (PoissonRecon's `--samplesPerNode`): a noisy 30k-point sphere at
