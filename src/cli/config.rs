@@ -431,7 +431,7 @@ impl ReconstructConfig {
         let least = scanflow::pipeline::reconstruct::least_mem(a.depth, screened);
         if run.mem_bytes < least {
             bail!(
-                "--mem {}: a reconstruction at --depth {} needs at least {} (its coarse solve, then the coarse solution beside one leaf solve, at the coarse ratio that needs least); raise --mem or lower --depth",
+                "--mem {}: a reconstruction at --depth {} needs at least {} (its coarse solve, then the coarse solution beside one leaf solve, each with the sampling-density grid, at the coarse ratio that needs least); raise --mem or lower --depth",
                 human_bytes(run.mem_bytes),
                 a.depth,
                 human_bytes(least)

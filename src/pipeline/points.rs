@@ -9,6 +9,7 @@ use rayon::prelude::*;
 
 use crate::error::Result;
 use crate::exec::cache::Lru;
+use crate::recon::density::DensityGrid;
 use crate::recon::{LeafPoints, Plan};
 use crate::store::Store;
 use crate::surface::NearPoints;
@@ -100,11 +101,20 @@ pub struct PointSource<'a> {
     deeper: HashMap<CellKey, Vec<usize>>,
     cache: Lru<usize, Arc<SortedCell>>,
     cap: u64,
+    /// The samples' shares of the surface, which weigh their normals.
+    density: Arc<DensityGrid>,
 }
 
 impl<'a> PointSource<'a> {
-    /// The points of `store` by `plan`'s leaf cells, caching up to `cap` bytes of sorted cells.
-    pub fn new(store: &'a Store, plan: Plan, cap: u64) -> PointSource<'a> {
+    /// The points of `store` by `plan`'s leaf cells, caching up to `cap` bytes of sorted cells;
+    /// their normals weighed by confidence and by `density`
+    /// ([`weigh_normals`](super::reconstruct::weigh_normals)).
+    pub fn new(
+        store: &'a Store,
+        plan: Plan,
+        cap: u64,
+        density: Arc<DensityGrid>,
+    ) -> PointSource<'a> {
         let mut by_key = HashMap::new();
         let mut deeper: HashMap<CellKey, Vec<usize>> = HashMap::new();
         for (i, c) in store.manifest.cells.iter().enumerate() {
@@ -125,6 +135,7 @@ impl<'a> PointSource<'a> {
             deeper,
             cache: Lru::new(cap),
             cap,
+            density,
         }
     }
 
@@ -155,7 +166,7 @@ impl<'a> PointSource<'a> {
 
     fn load(&self, i: usize) -> Result<SortedCell> {
         let mut b = self.store.read_cell(i)?;
-        super::reconstruct::weigh_normals(&mut b, self.plan.confidence);
+        super::reconstruct::weigh_normals(&mut b, self.plan.confidence, &self.density);
         Ok(SortedCell::new(b, &self.plan.cube, self.plan.leaf_level))
     }
 

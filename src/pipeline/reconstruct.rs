@@ -5,7 +5,7 @@
 
 use std::collections::BTreeSet;
 use std::path::PathBuf;
-use std::sync::Mutex;
+use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
 use rayon::prelude::*;
@@ -21,6 +21,7 @@ use crate::exec::Ctx;
 use crate::exec::budget::{Permit, Share};
 use crate::io::mesh_write::MeshTarget;
 use crate::recon::checkpoint::{LeafSummary, leaf_path, read_leaf_summary, write_leaf};
+use crate::recon::density::DensityGrid;
 use crate::recon::pou::unit_for;
 use crate::recon::{
     CoarseField, DEFAULT_ERROR, DEFAULT_MIN_POINTS, LeafDetail, LeafRule, LeafSolvers, Moments,
@@ -248,7 +249,7 @@ pub fn reconstruct(
         .budget
         .share(Share::PointCache)
         .min(POINT_CACHE_MAX_BYTES);
-    let mut src = PointSource::new(store, plan, point_cap);
+    let mut src = PointSource::new(store, plan, point_cap, Arc::clone(&coarse.density));
     let _cache_permit = ctx.budget.acquire_now(point_cap, "the store cell cache")?;
     let leaves = leaf_pass(store, &plan, params, &mut coarse, &dirs, &mut src, ctx)?;
     let m = &store.manifest;
@@ -326,27 +327,30 @@ pub fn reconstruct(
 ///
 /// So samples a scanner trusts less (grazing angles, far ranges) pull the surface less where
 /// better ones overlap them. The screening term and the iso-value keep unit weights.
-pub fn weigh_normals(b: &mut PointBatch, confidence: bool) {
+///
+/// Each normal is then scaled by its sample's share of the surface, the sampling-density
+/// weight of `density` ([`DensityGrid::weight`]), so that dense and sparse parts of a scan
+/// make the indicator jump alike.
+pub fn weigh_normals(b: &mut PointBatch, confidence: bool, density: &DensityGrid) {
     let by_property = confidence && b.confidence.len() == b.normal.len();
-    if confidence && !by_property {
-        return;
-    }
+    let by_length = confidence && !by_property;
     for (i, n) in b.normal.iter_mut().enumerate() {
-        let w = if by_property {
-            let c = b.confidence[i];
-            if c.is_finite() {
+        let area = density.weight(b.pos[i]);
+        let w = if by_length {
+            1.0
+        } else {
+            let c = if by_property { b.confidence[i] } else { 1.0 };
+            let c = if c.is_finite() {
                 c.clamp(0.0, 1.0)
             } else {
                 0.0
-            }
-        } else {
-            1.0
+            };
+            let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+            // Readers refuse zero normals; a zero one would splat nothing either way.
+            if len > 0.0 { f64::from(c / len) } else { 0.0 }
         };
-        let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
-        // Readers refuse zero normals; a zero one would splat nothing either way.
-        if len > 0.0 {
-            *n = n.map(|x| x * (w / len));
-        }
+        let s = (w * area) as f32;
+        *n = n.map(|x| x * s);
     }
 }
 
@@ -425,6 +429,8 @@ pub fn least_mem(depth: u32, screened: bool) -> u64 {
 /// occupied leaf cells, and which coarse voxels hold points.
 struct CoarsePass {
     field: CoarseField,
+    /// Every sample's share of the surface ([`crate::recon::density`]).
+    density: Arc<DensityGrid>,
     _permit: Permit,
     occupied: BTreeSet<CellKey>,
     support: Support,
@@ -435,14 +441,55 @@ struct CoarsePass {
     noise_voxels: Option<f64>,
 }
 
-/// Pass 1: splat every point into the coarse grid; collect occupied leaf cells, the coarse
-/// voxels holding points, and the moments that refuse planar and linear inputs; solve.
+/// Pass 0: every point's sampling density, splatted onto a grid at the coarse spacing; the
+/// cells are read in parallel waves and added in cell order (the sums are integers: the same
+/// grid in any order).
+fn density_pass(store: &Store, plan: &Plan, ctx: &Ctx) -> Result<DensityGrid> {
+    let m = &store.manifest;
+    // Charged with the coarse solve's scratch (`Plan::needs`).
+    let mut grid = DensityGrid::new(&plan.cube, plan.coarse_cells());
+    let stage = ctx.progress.stage("density", Some(m.point_count), "points");
+    let wave = 2 * ctx.threads();
+    let ncells = m.cells.len();
+    let mut i = 0;
+    while i < ncells {
+        let free = ctx.budget.total().saturating_sub(ctx.budget.used());
+        let (mut ids, mut bytes) = (Vec::with_capacity(wave), 0u64);
+        while i < ncells && ids.len() < wave {
+            let b = m.cells[i].count * BATCH_POINT_BYTES;
+            if !ids.is_empty() && bytes + b > free / 2 {
+                break;
+            }
+            ids.push(i);
+            bytes += b;
+            i += 1;
+        }
+        let _permit = tiles::admit_now(ctx, bytes);
+        let batches: Vec<Result<PointBatch>> = ctx
+            .pool
+            .install(|| ids.par_iter().map(|&j| store.read_cell(j)).collect());
+        for b in batches {
+            let b = b?;
+            grid.add(&b.pos);
+            stage.inc(b.len() as u64);
+        }
+    }
+    grid.finish();
+    stage.finish(None);
+    Ok(grid)
+}
+
+/// Pass 1: splat every point into the coarse grid, each normal weighed by its sample's
+/// share of the surface (pass 0); collect occupied leaf cells, the coarse voxels holding
+/// points, and the moments that refuse planar and linear inputs; solve.
 fn coarse_pass(store: &Store, plan: &Plan, weight: PointWeight, ctx: &Ctx) -> Result<CoarsePass> {
     let m = &store.manifest;
     let cgrid = plan.coarse_grid();
-    let permit = ctx
-        .budget
-        .acquire_now(plan.coarse_scratch_bytes(), "the coarse global solve")?;
+    let permit = ctx.budget.acquire_now(
+        plan.coarse_scratch_bytes() + plan.density_bytes(),
+        "the coarse global solve and the sampling density",
+    )?;
+    let density = Arc::new(density_pass(store, plan, ctx)?);
     let stage = ctx.progress.stage("splat", Some(m.point_count), "points");
     let mut v = vec![[0f32; 3]; cgrid.len()];
     let mut occupied = BTreeSet::new();
@@ -483,7 +530,7 @@ fn coarse_pass(store: &Store, plan: &Plan, weight: PointWeight, ctx: &Ctx) -> Re
                 .map(|&j| {
                     let mut b = store.read_cell(j)?;
                     let st = NoiseStats::of(&b.pos, &b.normal, plan.cube.origin, plan.spacing);
-                    weigh_normals(&mut b, plan.confidence);
+                    weigh_normals(&mut b, plan.confidence, &density);
                     Ok((b, st))
                 })
                 .collect()
@@ -523,14 +570,17 @@ fn coarse_pass(store: &Store, plan: &Plan, weight: PointWeight, ctx: &Ctx) -> Re
     let (field, conv) = ctx.pool.install(|| solve_coarse(plan, v, &screen));
     drop(screen);
     drop(screen_permit);
-    // From here on only the solution is held (the plan counted on it for the leaf pass).
+    // From here on only the solution and the density grid are held (the plan counted on
+    // them for the leaf pass).
     drop(permit);
-    let permit = ctx
-        .budget
-        .acquire_now(plan.coarse_field_bytes(), "the coarse solution")?;
+    let permit = ctx.budget.acquire_now(
+        plan.coarse_field_bytes() + plan.density_bytes(),
+        "the coarse solution and the sampling density",
+    )?;
     stage.finish(None);
     Ok(CoarsePass {
         field,
+        density,
         _permit: permit,
         occupied,
         support,
@@ -733,7 +783,10 @@ mod tests {
                     need.coarse <= b.coarse && need.leaf <= b.leaf,
                     "depth {depth}"
                 );
-                assert_eq!(p.coarse_field_bytes() + p.leaf_scratch_bytes(), need.leaf);
+                assert_eq!(
+                    p.coarse_field_bytes() + p.density_bytes() + p.leaf_scratch_bytes(),
+                    need.leaf
+                );
                 let less = plan_budget(least - (1 << 20));
                 let mut r = 4;
                 while 8 * r < 1 << depth {

@@ -13,6 +13,10 @@
 //! with E = 64 doubled the error, hence **the coarse voxel is kept at or below `E/8`**. The
 //! test `two_level_matches_one_global_solve` keeps checking it against [`global`]:
 //!
+//! 0. Every sample's **share of the surface**, from the sampling density on a grid at the
+//!    coarse spacing ([`density`]; Kazhdan, Bolitho, Hoppe 2006 §4.3): its normal is scaled
+//!    by it in every solve below, so that a part sampled 16 times more sparsely than the rest
+//!    makes the field jump as much and sits at the same iso-value.
 //! 1. A **coarse global solve** on the cube's `(N/r)³` coarse voxels (σ = 1 coarse voxel),
 //!    padded on each side so that the periodic solve never wraps the surface: 4 coarse
 //!    voxels, plus what rounding the grid up to a 5-smooth size for the FFT adds (so 4 to 56
@@ -63,6 +67,7 @@
 pub mod blend;
 pub mod checkpoint;
 pub mod coarse;
+pub mod density;
 pub mod fft_solve;
 pub mod global;
 pub mod leaf;

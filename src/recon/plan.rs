@@ -3,6 +3,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::density::DensityGrid;
 use super::fft_solve::LocalGrid;
 use crate::error::{Error, Result};
 use crate::types::{CellKey, Cube};
@@ -61,9 +62,10 @@ pub fn smooth_size(n: u64) -> u64 {
 /// What the grids of a plan hold at the two peaks of a run, or what a budget allows there.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct PlanBudget {
-    /// The coarse solve's scratch, while it runs.
+    /// The coarse solve's scratch and the density grid, while the solve runs.
     pub coarse: u64,
-    /// The coarse solution and one leaf solve, held together through the leaf pass.
+    /// The coarse solution, the density grid and one leaf solve, held together through the
+    /// leaf pass.
     pub leaf: u64,
 }
 
@@ -175,7 +177,8 @@ impl Plan {
     }
 
     /// What coarse ratio `r` holds at depth `depth`: the coarse solve's scratch, then the
-    /// coarse solution (f32 a node) with one leaf's fine solve (its `(2E)³` grid, `E = 8r`).
+    /// coarse solution (f32 a node) with one leaf's fine solve (its `(2E)³` grid, `E = 8r`);
+    /// the sampling-density grid ([`crate::recon::density`]) beside both.
     pub fn needs(depth: u32, r: u64, screened: bool) -> PlanBudget {
         let n = 1u64 << depth;
         let e = (LEAF_COARSE_VOXELS * r).min(n);
@@ -187,9 +190,10 @@ impl Plan {
             origin: [0.0; 3],
             unit: 1.0,
         };
+        let density = DensityGrid::bytes(n / r);
         PlanBudget {
-            coarse: grid(nc).solve_bytes(screened),
-            leaf: nc * nc * nc * 4 + grid(2 * e).solve_bytes(screened),
+            coarse: grid(nc).solve_bytes(screened) + density,
+            leaf: nc * nc * nc * 4 + density + grid(2 * e).solve_bytes(screened),
         }
     }
 
@@ -271,6 +275,11 @@ impl Plan {
     /// Bytes of the coarse solution (f32 a node).
     pub fn coarse_field_bytes(&self) -> u64 {
         self.coarse_nodes.pow(3) * 4
+    }
+
+    /// Bytes of the sampling-density grid ([`crate::recon::density`]), at the coarse spacing.
+    pub fn density_bytes(&self) -> u64 {
+        DensityGrid::bytes(self.coarse_cells())
     }
 
     /// Scratch bytes of the coarse global solve.

@@ -247,12 +247,12 @@ fn a_budget_below_what_the_depth_needs_is_refused_before_any_work() {
     // the least budget, with nothing made.
     let e = usage(&recon_args(&input, &out, &["--depth", "9", "--mem", "16M"]));
     assert!(
-        e.contains("--mem 16.00 MiB") && e.contains("--depth 9 needs at least 77.96 MiB"),
+        e.contains("--mem 16.00 MiB") && e.contains("--depth 9 needs at least 79.36 MiB"),
         "{e}"
     );
     assert!(!work.exists() && !out.exists());
     // At that least budget the run completes.
-    let o = ok(&recon_args(&input, &out, &["--depth", "9", "--mem", "78M"]));
+    let o = ok(&recon_args(&input, &out, &["--depth", "9", "--mem", "80M"]));
     assert!(out.is_file() && !work.exists(), "{o}");
 }
 
