@@ -441,6 +441,30 @@ struct CoarsePass {
     noise_voxels: Option<f64>,
 }
 
+/// The next wave of store cells from `*i` (advanced past them): at most `wave` cells, within
+/// half of what the budget has free at `per_point` bytes a point, at least one; with its bytes.
+fn cell_wave(
+    store: &Store,
+    i: &mut usize,
+    wave: usize,
+    per_point: u64,
+    ctx: &Ctx,
+) -> (Vec<usize>, u64) {
+    let cells = &store.manifest.cells;
+    let free = ctx.budget.total().saturating_sub(ctx.budget.used());
+    let (mut ids, mut bytes) = (Vec::with_capacity(wave), 0u64);
+    while *i < cells.len() && ids.len() < wave {
+        let b = cells[*i].count * per_point;
+        if !ids.is_empty() && bytes + b > free / 2 {
+            break;
+        }
+        ids.push(*i);
+        bytes += b;
+        *i += 1;
+    }
+    (ids, bytes)
+}
+
 /// Pass 0: every point's sampling density, splatted onto a grid at the coarse spacing; the
 /// cells are read in parallel waves and added in cell order (the sums are integers: the same
 /// grid in any order).
@@ -453,17 +477,7 @@ fn density_pass(store: &Store, plan: &Plan, ctx: &Ctx) -> Result<DensityGrid> {
     let ncells = m.cells.len();
     let mut i = 0;
     while i < ncells {
-        let free = ctx.budget.total().saturating_sub(ctx.budget.used());
-        let (mut ids, mut bytes) = (Vec::with_capacity(wave), 0u64);
-        while i < ncells && ids.len() < wave {
-            let b = m.cells[i].count * BATCH_POINT_BYTES;
-            if !ids.is_empty() && bytes + b > free / 2 {
-                break;
-            }
-            ids.push(i);
-            bytes += b;
-            i += 1;
-        }
+        let (ids, bytes) = cell_wave(store, &mut i, wave, BATCH_POINT_BYTES, ctx);
         let _permit = tiles::admit_now(ctx, bytes);
         let batches: Vec<Result<PointBatch>> = ctx
             .pool
@@ -510,17 +524,8 @@ fn coarse_pass(store: &Store, plan: &Plan, weight: PointWeight, ctx: &Ctx) -> Re
         // At most `wave` cells, within half of what is free (the screening samples grow into
         // the other half), at least one. Batches are splatted in cell order whatever the
         // waves.
-        let free = ctx.budget.total().saturating_sub(ctx.budget.used());
-        let (mut ids, mut bytes) = (Vec::with_capacity(wave), 0u64);
-        while i < ncells && ids.len() < wave {
-            let b = m.cells[i].count * (BATCH_POINT_BYTES + NOISE_KEY_BYTES);
-            if !ids.is_empty() && bytes + b > free / 2 {
-                break;
-            }
-            ids.push(i);
-            bytes += b;
-            i += 1;
-        }
+        let per_point = BATCH_POINT_BYTES + NOISE_KEY_BYTES;
+        let (ids, bytes) = cell_wave(store, &mut i, wave, per_point, ctx);
         // The coarse grid's permit is held: admitted without waiting (see `tiles::admit_now`).
         let _permit = tiles::admit_now(ctx, bytes);
         // Each cell's noise statistics beside its read (for `auto` and the vertex fit);

@@ -43,6 +43,23 @@ fn recon(pts: &Path, out: &Path, extra: &[&str]) {
     ok(&args);
 }
 
+/// Reconstruct `pts` at depth 8 into `out` with `extra` options.
+fn at_depth_8(pts: &Path, out: &Path, extra: &[&str]) {
+    let mut args = vec!["reconstruct", s(pts), "-o", s(out), "--depth", "8"];
+    args.extend_from_slice(&["--progress", "none"]);
+    args.extend_from_slice(extra);
+    ok(&args);
+}
+
+/// Write `rows` (`n` lines `x y z nx ny nz`, then what `extra` declares) as an ASCII PLY of
+/// oriented points, `extra` holding the header's further property lines.
+fn oriented_ply(path: &Path, n: usize, extra: &str, rows: &str) {
+    let head = format!(
+        "ply\nformat ascii 1.0\nelement vertex {n}\nproperty double x\nproperty double y\nproperty double z\nproperty float nx\nproperty float ny\nproperty float nz\n{extra}end_header\n"
+    );
+    std::fs::write(path, head + rows).unwrap();
+}
+
 /// Independent readers: every format holds the binary PLY's vertices and triangles; the
 /// normals are unit and face out of the torus; the densities match the sampling (30k points
 /// over the torus's area 4π²Rr).
@@ -242,13 +259,7 @@ fn densities_follow_the_sampling_and_trim_by_a_threshold() {
         ));
     }
     let pts = d.join("uneven.ply");
-    std::fs::write(
-        &pts,
-        format!(
-            "ply\nformat ascii 1.0\nelement vertex {kept}\nproperty double x\nproperty double y\nproperty double z\nproperty float nx\nproperty float ny\nproperty float nz\nend_header\n{text}"
-        ),
-    )
-    .unwrap();
+    oriented_ply(&pts, kept, "", &text);
     let dens = d.join("dens.ply");
     recon(&pts, &dens, &["--ascii", "--density"]);
     let lines = vertex_lines(&dens);
@@ -315,13 +326,7 @@ fn small_islands_are_dropped_as_the_mesh_is_written() {
     }
     let n = b.pos.len() + b.pos.len().div_ceil(100);
     let pts = d.join("pebble.ply");
-    std::fs::write(
-        &pts,
-        format!(
-            "ply\nformat ascii 1.0\nelement vertex {n}\nproperty double x\nproperty double y\nproperty double z\nproperty float nx\nproperty float ny\nproperty float nz\nend_header\n{text}"
-        ),
-    )
-    .unwrap();
+    oriented_ply(&pts, n, "", &text);
     let pieces = |mesh: &Path| {
         let rep = ok(&["check", s(mesh), "--json"]);
         let v: serde_json::Value = serde_json::from_str(&rep).unwrap();
@@ -331,22 +336,8 @@ fn small_islands_are_dropped_as_the_mesh_is_written() {
         )
     };
     let (both, alone) = (d.join("both.ply"), d.join("alone.ply"));
-    let at_depth_8 = |out: &Path, extra: &[&str]| {
-        let mut args = vec![
-            "reconstruct",
-            s(&pts),
-            "-o",
-            s(out),
-            "--depth",
-            "8",
-            "--progress",
-            "none",
-        ];
-        args.extend_from_slice(extra);
-        ok(&args);
-    };
-    at_depth_8(&both, &[]);
-    at_depth_8(&alone, &["--trim-islands", "0.02"]);
+    at_depth_8(&pts, &both, &[]);
+    at_depth_8(&pts, &alone, &["--trim-islands", "0.02"]);
     let (k, right) = pieces(&both);
     assert!(k == 2 && right > 2.25, "{k} pieces up to x = {right}");
     let (k, right) = pieces(&alone);
@@ -751,15 +742,10 @@ fn confidence_weighting_lets_trusted_samples_win() {
             sample(q, m, 0.05);
         }
     }
-    let head = |n: usize, confidence: &str| {
-        format!(
-            "ply\nformat ascii 1.0\nelement vertex {n}\nproperty double x\nproperty double y\nproperty double z\nproperty float nx\nproperty float ny\nproperty float nz\n{confidence}end_header\n"
-        )
-    };
     let pts = d.join("mixed.ply");
-    std::fs::write(&pts, head(n, "property float confidence\n") + &text).unwrap();
+    oriented_ply(&pts, n, "property float confidence\n", &text);
     let long = d.join("lengths.ply");
-    std::fs::write(&long, head(n, "") + &lengths).unwrap();
+    oriented_ply(&long, n, "", &lengths);
     let truth = d.join("clean.truth.json");
     let mean = |mesh: &Path| {
         let rep = ok(&["check", s(mesh), "--truth", s(&truth), "--json"]);
@@ -769,20 +755,6 @@ fn confidence_weighting_lets_trusted_samples_win() {
             .unwrap()
     };
     let (plain, weighted) = (d.join("plain.ply"), d.join("weighted.ply"));
-    let at_depth_8 = |pts: &Path, out: &Path, extra: &[&str]| {
-        let mut args = vec![
-            "reconstruct",
-            s(pts),
-            "-o",
-            s(out),
-            "--depth",
-            "8",
-            "--progress",
-            "none",
-        ];
-        args.extend_from_slice(extra);
-        ok(&args);
-    };
     at_depth_8(&pts, &plain, &[]);
     at_depth_8(&pts, &weighted, &["--confidence"]);
     let (a, b) = (mean(&plain), mean(&weighted));
