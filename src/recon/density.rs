@@ -123,13 +123,6 @@ impl DensityGrid {
         }
     }
 
-    /// Add another grid's samples (the same geometry): the sum is the same in any order.
-    pub fn merge(&mut self, o: &DensityGrid) {
-        for (a, b) in self.counts.iter_mut().zip(&o.counts) {
-            *a = a.saturating_add(*b);
-        }
-    }
-
     /// Compute `W̄` once every sample is splatted.
     pub fn finish(&mut self) {
         let (mut s1, mut s2) = (0u128, 0u128);
@@ -138,14 +131,6 @@ impl DensityGrid {
             s2 += u128::from(c) * u128::from(c);
         }
         self.mean = if s1 > 0 { s2 as f64 / s1 as f64 } else { 0.0 };
-    }
-
-    /// The density at `p`, in the grid's units.
-    pub fn at(&self, p: [f64; 3]) -> f64 {
-        self.support(p)
-            .iter()
-            .map(|&(i, w)| w * f64::from(self.counts[i]))
-            .sum()
     }
 
     /// The weight `A_s` of a sample at `p` (module docs).
@@ -159,15 +144,10 @@ impl DensityGrid {
             return 1.0;
         }
         // Samples around, counting this one: an isolated sample (an outlier) has about 1 and
-        // is not scaled up; from 2 to 4 the cap rises to `MAX_WEIGHT`.
+        // is not scaled up; from `LONE` to twice that the cap rises to `MAX_WEIGHT`.
         let around = d / own;
         let cap = 1.0 + (MAX_WEIGHT - 1.0) * ((around - LONE) / LONE).clamp(0.0, 1.0);
         (self.mean / d).clamp(1.0 / MAX_WEIGHT, cap)
-    }
-
-    /// Bytes held.
-    pub fn held_bytes(&self) -> u64 {
-        self.counts.len() as u64 * 4
     }
 }
 
@@ -249,13 +229,11 @@ mod tests {
         let mut rev = pts.clone();
         rev.reverse();
         let (x, y) = rev.split_at(777);
-        let mut c = DensityGrid::new(&unit(), 8);
         b.add(y);
-        c.add(x);
-        b.merge(&c);
+        b.add(x);
         assert_eq!(a.counts, b.counts);
         // Points on the cube's far faces stay inside the grid.
         a.add(&[[1.0, 1.0, 1.0], [0.0, 0.0, 0.0]]);
-        assert_eq!(DensityGrid::bytes(8), a.held_bytes());
+        assert_eq!(DensityGrid::bytes(8), a.counts.len() as u64 * 4);
     }
 }
