@@ -41,7 +41,7 @@
 //! **Memory**: 4 bytes a node, `(N/r + 1)³` nodes: as many as the coarse solution, beside
 //! which it is held through the leaf and tile passes (the plan charges it).
 
-use crate::types::Cube;
+use crate::types::{Cube, round_index};
 
 /// The largest factor by which a sample's normal is scaled up (or down): density contrasts
 /// up to this ratio are fully compensated (module docs).
@@ -85,31 +85,32 @@ impl DensityGrid {
         }
     }
 
+    /// Along axis `a`: the three nodes around coordinate `x` (clamped into the grid) and
+    /// their quadratic B-spline weights (they sum to 1).
+    #[inline(always)]
+    fn axis(&self, x: f64, a: usize) -> ([usize; 3], [f64; 3]) {
+        let top = self.n - 1;
+        let u = ((x - self.origin[a]) * self.inv_h).clamp(0.0, top as f64);
+        let c = round_index(u);
+        let t = u - c as f64;
+        let w = [
+            0.5 * (0.5 - t) * (0.5 - t),
+            0.75 - t * t,
+            0.5 * (0.5 + t) * (0.5 + t),
+        ];
+        ([c.saturating_sub(1), c, (c + 1).min(top)], w)
+    }
+
     /// The 27 nodes around `p` with their quadratic B-spline weights (clamped into the
     /// grid; they sum to 1).
     #[inline]
     fn support(&self, p: [f64; 3]) -> [(usize, f64); 27] {
-        let top = (self.n - 1) as f64;
-        let mut at = [[0usize; 3]; 3];
-        let mut w = [[0f64; 3]; 3];
-        for a in 0..3 {
-            let u = ((p[a] - self.origin[a]) * self.inv_h).clamp(0.0, top);
-            let c = u.round();
-            let t = u - c;
-            w[a] = [
-                0.5 * (0.5 - t) * (0.5 - t),
-                0.75 - t * t,
-                0.5 * (0.5 + t) * (0.5 + t),
-            ];
-            for (k, x) in at[a].iter_mut().enumerate() {
-                *x = (c + k as f64 - 1.0).clamp(0.0, top) as usize;
-            }
-        }
+        let [(a0, w0), (a1, w1), (a2, w2)] = [0, 1, 2].map(|a| self.axis(p[a], a));
         let n = self.n;
         std::array::from_fn(|c| {
             let (i, j, k) = (c % 3, c / 3 % 3, c / 9);
-            let idx = (at[2][k] * n + at[1][j]) * n + at[0][i];
-            (idx, w[0][i] * w[1][j] * w[2][k])
+            let idx = (a2[k] * n + a1[j]) * n + a0[i];
+            (idx, w0[i] * w1[j] * w2[k])
         })
     }
 
@@ -117,7 +118,7 @@ impl DensityGrid {
     pub fn add(&mut self, pos: &[[f64; 3]]) {
         for p in pos {
             for (i, w) in self.support(*p) {
-                let q = (w * ONE).round() as u32;
+                let q = round_index(w * ONE) as u32;
                 self.counts[i] = self.counts[i].saturating_add(q);
             }
         }
@@ -135,11 +136,23 @@ impl DensityGrid {
 
     /// The weight `A_s` of a sample at `p` (module docs).
     pub fn weight(&self, p: [f64; 3]) -> f64 {
-        let (mut d, mut own) = (0.0, 0.0);
-        for (i, w) in self.support(p) {
-            d += w * f64::from(self.counts[i]);
-            own += w * w * ONE;
+        // The kernel is a product over the axes, so both sums are too.
+        let [(a0, w0), (a1, w1), (a2, w2)] = [0, 1, 2].map(|a| self.axis(p[a], a));
+        let n = self.n;
+        let mut d = 0.0;
+        for k in 0..3 {
+            let mut dk = 0.0;
+            for j in 0..3 {
+                let row = &self.counts[(a2[k] * n + a1[j]) * n..];
+                let dj = w0[0] * f64::from(row[a0[0]])
+                    + w0[1] * f64::from(row[a0[1]])
+                    + w0[2] * f64::from(row[a0[2]]);
+                dk += w1[j] * dj;
+            }
+            d += w2[k] * dk;
         }
+        let sq = |w: [f64; 3]| w[0] * w[0] + w[1] * w[1] + w[2] * w[2];
+        let own = sq(w0) * sq(w1) * sq(w2) * ONE;
         if d <= 0.0 || self.mean <= 0.0 {
             return 1.0;
         }

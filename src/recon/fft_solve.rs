@@ -41,6 +41,7 @@ use rustfft::num_complex::Complex32;
 use rustfft::{Fft, FftPlanner};
 
 use super::screen::Screen;
+use crate::types::floor;
 
 /// A periodic grid of `n` nodes per axis.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -98,7 +99,7 @@ impl LocalGrid {
         let mut f = [0f64; 3];
         for a in 0..3 {
             let u = (p[a] - self.origin[a]) / self.h;
-            let fl = u.floor();
+            let fl = floor(u);
             i0[a] = fl as i64;
             f[a] = u - fl;
         }
@@ -137,7 +138,7 @@ pub fn splat(grid: &LocalGrid, pos: &[[f64; 3]], nrm: &[[f32; 3]], v: &mut [[f32
         let mut w = [[0f32; 2]; 3];
         for a in 0..3 {
             let u = (p[a] - grid.origin[a]) * inv_h;
-            let fl = u.floor();
+            let fl = floor(u);
             let i0 = fl as i64;
             let f = (u - fl) as f32;
             at[a] = [i0.rem_euclid(ni) as usize, (i0 + 1).rem_euclid(ni) as usize];

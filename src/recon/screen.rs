@@ -51,6 +51,7 @@
 use std::collections::HashMap;
 
 use super::fft_solve::LocalGrid;
+use crate::types::floor;
 
 /// The screening weight for samples of no known noise: PoissonRecon's default `--pointWeight`.
 pub const BASE_POINT_WEIGHT: f64 = 4.0;
@@ -206,7 +207,7 @@ impl ScreenBuilder {
             let mut off = [0f64; 3];
             for a in (0..3).rev() {
                 let u = (p[a] - g.origin[a]) / g.h;
-                let fl = u.floor();
+                let fl = floor(u);
                 off[a] = u - fl;
                 key = key * g.n as u64 + (fl as i64).rem_euclid(n) as u64;
             }

@@ -7,7 +7,9 @@
 //! split into its non-empty children. A grid cell that is still too full becomes an
 //! *oversized* leaf, to be split again by a finer count of its own points. Leaves come out in
 //! Morton order, each covering a contiguous range of grid cells, so the leaf of a point is a
-//! binary search over the range starts. [`GridMap`] gives a point's grid cell.
+//! binary search over the range starts, narrowed by a table over the grid's first
+//! [`PREFIX_LEVELS`] levels to the leaves starting inside the point's block (usually none, so
+//! no search at all). [`GridMap`] gives a point's grid cell.
 
 use crate::types::{CellKey, Cube, morton3};
 
@@ -36,7 +38,15 @@ pub struct Hierarchy {
     /// Non-empty leaves in Morton order.
     pub leaves: Vec<Leaf>,
     starts: Vec<u64>,
+    /// Per block of the grid's first `prefix` levels: how many leaves start at or before the
+    /// block's first grid cell, and how many start before the next block.
+    blocks: Vec<(u32, u32)>,
+    /// Bits of a grid cell's Morton index below its block's.
+    block_shift: u32,
 }
+
+/// Levels of the table that narrows [`Hierarchy::leaf_of`]'s search: `8^4` blocks, 32 KiB.
+pub const PREFIX_LEVELS: u32 = 4;
 
 impl Hierarchy {
     /// Cut the hierarchy from `counts` (length `8^levels`, Morton order).
@@ -72,19 +82,36 @@ impl Hierarchy {
                 }
             }
         }
-        let starts = leaves.iter().map(|l| l.start).collect();
+        let starts: Vec<u64> = leaves.iter().map(|l| l.start).collect();
+        let block_shift = 3 * (levels - levels.min(PREFIX_LEVELS));
+        let blocks = (0..1u64 << (3 * levels.min(PREFIX_LEVELS)))
+            .map(|b| {
+                let first = b << block_shift;
+                let next = (b + 1) << block_shift;
+                (
+                    starts.partition_point(|&s| s <= first) as u32,
+                    starts.partition_point(|&s| s < next) as u32,
+                )
+            })
+            .collect();
         Hierarchy {
             base,
             levels,
             leaves,
             starts,
+            blocks,
+            block_shift,
         }
     }
 
     /// The leaf holding grid cell `m`, if any.
     #[inline]
     pub fn leaf_of(&self, m: u64) -> Option<u32> {
-        let i = self.starts.partition_point(|&s| s <= m);
+        // The leaves starting at or before m: those up to the block's first cell, and those
+        // starting inside the block up to m.
+        let (lo, hi) = *self.blocks.get((m >> self.block_shift) as usize)?;
+        let (lo, hi) = (lo as usize, hi as usize);
+        let i = lo + self.starts[lo..hi].partition_point(|&s| s <= m);
         if i == 0 {
             return None;
         }
@@ -175,6 +202,35 @@ mod tests {
         assert_eq!(h.leaf_of(63), Some(2));
         assert_eq!(h.leaf_of(60), Some(2));
         assert_eq!(h.leaf_of(20), None);
+    }
+
+    #[test]
+    fn the_block_table_finds_what_a_scan_finds() {
+        // Clustered counts on grids coarser than, as fine as and finer than the block table, cut at
+        // several limits: every grid cell's leaf is the one a linear scan of the ranges finds.
+        for levels in [1, 4, 5, 6] {
+            let n = 1usize << (3 * levels);
+            let mut x = 12345u64;
+            let counts: Vec<u64> = (0..n)
+                .map(|i| {
+                    x = x
+                        .wrapping_mul(6364136223846793005)
+                        .wrapping_add(1442695040888963407);
+                    if (i / 64) % 3 == 0 { (x >> 60) % 5 } else { 0 }
+                })
+                .collect();
+            for max in [1, 7, 100, 5000] {
+                let h = Hierarchy::build(CellKey::ROOT, levels, &counts, max);
+                let mut scan = vec![None; n + 9];
+                for (i, l) in h.leaves.iter().enumerate() {
+                    scan[l.start as usize..l.end as usize].fill(Some(i as u32));
+                }
+                for (m, want) in scan.into_iter().enumerate() {
+                    let got = h.leaf_of(m as u64);
+                    assert_eq!(got, want, "levels {levels}, limit {max}, cell {m}");
+                }
+            }
+        }
     }
 
     #[test]
