@@ -65,16 +65,15 @@ pub fn scatter_pass(
             .collect();
         done.into_iter().collect()
     };
+    // Each round loads the next half into `loading` while appending `loaded`'s first
+    // `ready` groups; the first round has nothing to append, the last nothing to load.
     let mut parts = chunks.chunks(half);
-    let mut ready = match parts.next() {
-        Some(p) => {
-            ctx.pool.install(|| load(p, &mut loaded))?;
-            p.len()
-        }
-        None => 0,
-    };
-    while ready > 0 {
+    let mut ready = 0;
+    loop {
         let next = parts.next();
+        if next.is_none() && ready == 0 {
+            break;
+        }
         let mut next_done: Result<()> = Ok(());
         let pushed = ctx.pool.in_place_scope(|s| {
             if let Some(p) = next {
