@@ -639,10 +639,12 @@ pub struct ReconstructArgs {
     pub smooth: f64,
     /// Screening weight α of the screened Poisson solve (Kazhdan & Hoppe 2013): how
     /// strongly the surface is pulled through the samples against the smoothed normals, in
-    /// [0, 64]; 0 solves the unscreened equation. `auto` measures the samples' noise and
-    /// takes 4 for noisy scans, up to 32 for precise ones (fine relief, metrology). Default 4,
-    /// PoissonRecon's `--pointWeight` (also accepted), with its scaling by depth.
-    #[arg(long, alias = "pointWeight", default_value = "4")]
+    /// [0, 64]; 0 solves the unscreened equation; a number is used as given, as
+    /// PoissonRecon's `--pointWeight` (also accepted), with its scaling by depth. `standard`
+    /// (the default) takes 4, lowered as 1/σ² where the samples' measured noise across the
+    /// surface exceeds 0.85 voxel (there 4 grows blobs out of the noise); `auto` also raises
+    /// it, up to 32, for precise samples (fine relief, metrology).
+    #[arg(long, alias = "pointWeight", default_value = "standard")]
     pub point_weight: String,
     /// Keep the vertices where marching cubes put them, instead of moving each onto the
     /// plane (or, where they are curved, the quadratic jet) of its nearest input points (by

@@ -395,11 +395,12 @@ impl ReconstructConfig {
             bail!("--smooth {smooth}: expected a width in voxels in (0, {MAX_SMOOTH_VOXELS}]");
         }
         let point_weight = match a.point_weight.as_str() {
+            "standard" => PointWeight::Standard,
             "auto" => PointWeight::Auto,
             w => match w.parse::<f64>() {
                 Ok(a) if (0.0..=MAX_POINT_WEIGHT).contains(&a) => PointWeight::Fixed(a),
                 _ => bail!(
-                    "--point-weight {w}: expected auto or a screening weight in [0, {MAX_POINT_WEIGHT}]"
+                    "--point-weight {w}: expected standard, auto or a screening weight in [0, {MAX_POINT_WEIGHT}]"
                 ),
             },
         };

@@ -63,10 +63,13 @@ pub fn ingest(st: &IngestStats, out: &Path) {
 /// `reconstruct`'s line: the whole run's time `total_secs` (ingest and normal estimation
 /// included, where the inputs were point files), then the solve and mesh's own.
 pub fn reconstruct(st: &ReconStats, out: &Path, total_secs: f64) {
-    let noise = st
-        .noise_voxels
-        .map(|s| format!(" (noise {s:.3} voxel)"))
-        .unwrap_or_default();
+    let noise = match (st.noise_voxels, st.jet_noise_voxels) {
+        (Some(s), Some(j)) => {
+            format!(" (noise {s:.3} voxel within a voxel, {j:.3} about local quadrics)")
+        }
+        (Some(s), None) => format!(" (noise {s:.3} voxel)"),
+        _ => String::new(),
+    };
     let screened = if st.point_weight > 0.0 && st.leaves_solved > 0 {
         format!(
             ", screened with --point-weight {}{noise}: {:.1} CG iterations a leaf",

@@ -26,7 +26,7 @@ use crate::recon::pou::unit_for;
 use crate::recon::{
     CoarseField, DEFAULT_ERROR, DEFAULT_MIN_POINTS, LeafDetail, LeafRule, LeafSolvers, Moments,
     Plan, PlanBudget, PointWeight, fft_solve, refine_leaf,
-    screen::{self, NOISE_KEY_BYTES, NoiseStats, ScreenBuilder},
+    screen::{NOISE_KEY_BYTES, NoiseStats, ScreenBuilder},
     solve_coarse,
 };
 use crate::store::Store;
@@ -51,8 +51,9 @@ pub struct ReconParams {
     pub depth: u32,
     /// Gaussian smoothing width, in voxels of each grid.
     pub sigma_vox: f64,
-    /// Screening weight α (`--point-weight`: a fixed α, default 4, 0: unscreened; or `auto`
-    /// from the samples' noise), see [`crate::recon::screen`].
+    /// Screening weight α (`--point-weight`: `standard`, 4 lowered for noise beyond a
+    /// voxel; `auto`, also raised for precise samples; or a fixed α, 0: unscreened), see
+    /// [`crate::recon::screen`].
     pub point_weight: PointWeight,
     /// Tile edge in fine voxels (`None`: 64, at least one leaf, at most the cube).
     pub tile_voxels: Option<u64>,
@@ -115,7 +116,7 @@ impl ReconParams {
         ReconParams {
             depth,
             sigma_vox: 1.0,
-            point_weight: PointWeight::Fixed(screen::BASE_POINT_WEIGHT),
+            point_weight: PointWeight::Standard,
             fit: true,
             tile_voxels: None,
             work_dir,
@@ -159,6 +160,9 @@ pub struct ReconStats {
     /// The samples' spread across the surface in fine voxels, where one could be measured
     /// ([`crate::recon::screen::NoiseStats`]).
     pub noise_voxels: Option<f64>,
+    /// The samples' spread about local quadric fits in fine voxels, where one could be
+    /// measured ([`crate::recon::screen::NoiseStats::jet_sigma_voxels`]).
+    pub jet_noise_voxels: Option<f64>,
     /// Conjugate-gradient iterations of the screened coarse solve.
     pub coarse_iterations: u32,
     /// Leaves whose fine solve ran in this run (refined and not reused).
@@ -302,6 +306,7 @@ pub fn reconstruct(
         iso: leaves.iso,
         point_weight: plan.point_weight,
         noise_voxels: coarse.noise_voxels,
+        jet_noise_voxels: coarse.jet_noise_voxels,
         coarse_iterations: coarse.iterations,
         leaves_solved: leaves.solved,
         leaf_iterations: leaves.iterations,
@@ -382,9 +387,9 @@ fn plan_run(store: &Store, params: &ReconParams, ctx: &Ctx) -> Result<Plan> {
         m.cube,
         params.depth,
         params.sigma_vox,
-        // Before the noise is measured `auto` is the base weight: the grids are sized for a
-        // screened solve, and the coarse pass sets the weight.
-        params.point_weight.alpha(None),
+        // Before the noise is measured `standard` and `auto` are the base weight: the grids
+        // are sized for a screened solve, and the coarse pass sets the weight (never to 0).
+        params.point_weight.alpha(&NoiseStats::default()),
         params.tile_voxels,
         plan_budget(ctx.budget.total()),
     )?;
@@ -439,6 +444,8 @@ struct CoarsePass {
     point_weight: f64,
     /// The samples' spread across the surface, where one could be measured.
     noise_voxels: Option<f64>,
+    /// The samples' spread about local quadric fits, where one could be measured.
+    jet_noise_voxels: Option<f64>,
 }
 
 /// The next wave of store cells from `*i` (advanced past them): at most `wave` cells, within
@@ -570,7 +577,8 @@ fn coarse_pass(store: &Store, plan: &Plan, weight: PointWeight, ctx: &Ctx) -> Re
     moments.check_not_flat(&store.dir)?;
     let stage = ctx.progress.stage("coarse", None, "solves");
     let noise_voxels = noise.sigma_voxels();
-    let point_weight = weight.alpha(noise_voxels);
+    let jet_noise_voxels = noise.jet_sigma_voxels();
+    let point_weight = weight.alpha(&noise);
     let screen = screen.finish(point_weight);
     let (field, conv) = ctx.pool.install(|| solve_coarse(plan, v, &screen));
     drop(screen);
@@ -592,6 +600,7 @@ fn coarse_pass(store: &Store, plan: &Plan, weight: PointWeight, ctx: &Ctx) -> Re
         iterations: conv.iterations,
         point_weight,
         noise_voxels,
+        jet_noise_voxels,
     })
 }
 

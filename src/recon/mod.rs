@@ -41,8 +41,8 @@
 //!
 //! Every solve of the scheme, the coarse global one and both of each leaf, is **screened**
 //! (Kazhdan & Hoppe 2013, [`screen`]) with the weight `--point-weight` relative to its own
-//! grid (under `auto`, one weight per run chosen from the samples' measured noise by the
-//! coarse pass, [`screen::auto_point_weight`]): the samples aggregated per voxel of that grid
+//! grid (by default and under `auto`, one weight per run chosen from the samples' measured
+//! noise by the coarse pass, [`screen::PointWeight`]): the samples aggregated per voxel of that grid
 //! pull the field to one value, which restores the short wavelengths the Gaussian and the
 //! splat attenuate (about `exp(−2π²σ²/λ²)` for a wavelength of `λ` voxels). The coarse
 //! global solve aggregates the samples as the splat pass streams them, one entry per

@@ -30,27 +30,54 @@
 //! where `α λ / 2π` is large against 1: with α = 4 every wavelength the grid resolves
 //! (PoissonRecon's default `--pointWeight 4` scales with the depth in the same way).
 //!
-//! **The weight can follow the noise** (`--point-weight auto`). Screening pulls the
-//! surface through the samples, which is what precise scans want and what noisy ones must
-//! not get: on a 1M-point sphere carrying a relief of 1% amplitude at depth 9, α = 32 brings
-//! a relief of 8 voxels' wavelength from 9.7·10⁻⁴ to 5.0·10⁻⁴ (mean distance to the exact
-//! surface, no vertex fit), while with noise of 0.23 voxel it prints the noise into the
-//! surface (6.7·10⁻⁴ at α = 4, 1.1·10⁻³ at α = 16). The screened energy is a least-squares
-//! fit to the samples, and the weight of a measurement is its precision, so `auto` estimates
-//! the samples' spread across the surface ([`NoiseStats`]: the offsets along the mean normal
-//! of the samples sharing a fine voxel, pooled over the scan with one degree of freedom
-//! lost per voxel) and takes `α = 4 · clamp((σ_ref/σ)², 1, 8)`
-//! ([`auto_point_weight`]): 4, PoissonRecon's default, at the noise of a typical scan
-//! (σ at or above [`NOISE_REFERENCE_VOXELS`]), up to 32 for precise samples. One number per
-//! run, from every point, in a fixed order: the coarse and the leaf solves, and any thread
-//! count or tile size, share it. Where no fine voxel holds two samples (sparse points) there
-//! is no estimate and α = 4. It is not the default: on real scans the spread within a voxel
-//! takes structure for precision (airborne LiDAR's vegetation returns read 0.09 voxel and
-//! took α = 20, a rougher terrain than at 4).
+//! **The weight follows the noise.** Screening pulls the surface through the samples, which
+//! is what precise scans want and what noisy ones must not get. Two measured regimes:
+//!
+//! - *Noise across the surface of a voxel or more* breaks the default α = 4. The samples
+//!   then occupy a shell several voxels thick, every occupied voxel pulls χ to `c`, and the
+//!   sparse voxels at the shell's fringe (a sample or two, two or three σ out) become small
+//!   closed surfaces of their own. On a 2.5M-point sphere at depth 9 (mean two-sided
+//!   distance to the exact sphere; pieces of the mesh):
+//!
+//!   | noise σ (voxels) | α = 0 | α = 1 | α = 2 | α = 4 |
+//!   |---|---|---|---|---|
+//!   | 0.8 | 1.8·10⁻⁴, 1 | 3.3·10⁻⁴, 1 | 4.2·10⁻⁴, 1 | 5.6·10⁻⁴, 1 |
+//!   | 1.0 | 2.1·10⁻⁴, 1 | 3.9·10⁻⁴, 1 | 5.2·10⁻⁴, 1 | 6.9·10⁻⁴, 2 |
+//!   | 1.2 | 2.4·10⁻⁴, 1 | 4.9·10⁻⁴, 1 | 7.2·10⁻⁴, 1 | 9.3·10⁻⁴, 5 |
+//!   | 1.6 | 3.0·10⁻⁴, 1 | 6.5·10⁻⁴, 1 | 9.6·10⁻⁴, 1 | 1.7·10⁻³, 151 |
+//!   | 2.4 | | | | 3.6·10⁻³, 1319 |
+//!
+//!   (PoissonRecon, screened with 4, at σ = 1.6: 1.0·10⁻³ in 2 pieces.) So the weight is
+//!   kept up to [`NOISE_LIMIT_VOXELS`] and falls as the precision `1/σ²` beyond:
+//!   `α = 4 · min(1, (σ_lim/σ_jet)²)`, with σ_jet the spread about local quadric fits
+//!   ([`NoiseStats::jet_sigma_voxels`]), which reads noise beyond a voxel. This is the
+//!   default (`--point-weight standard`); every sphere above is then one piece (σ = 1.0:
+//!   α = 3.1, 6.1·10⁻⁴; 1.2: 2.0, 7.3·10⁻⁴; 1.6: 1.2, 7.0·10⁻⁴; 2.4: 0.66, 8.4·10⁻⁴).
+//!   Its cost: a relief of short wavelength under noise of 0.8 voxel wants α = 4 and the
+//!   quadrics take part of it for noise. At 1% amplitude and 8 voxels' wavelength the relief
+//!   reads 1.5 and gets α = 1.25 (mean distance 1.54·10⁻³ against 1.35·10⁻³ at 4 and
+//!   PoissonRecon's 1.12·10⁻³); at 12 voxels it reads 1.06 (α = 2.6: 8.7·10⁻⁴ against
+//!   8.6·10⁻⁴ at 4); from 18 voxels on it reads the noise (0.83) and keeps 4.
+//! - *Precise samples* can take more than 4: on a 1M-point sphere carrying a relief of 1%
+//!   amplitude at depth 9, α = 32 brings a relief of 8 voxels' wavelength from 9.7·10⁻⁴ to
+//!   5.0·10⁻⁴ (no vertex fit), while with noise of 0.23 voxel it prints the noise into the
+//!   surface (6.7·10⁻⁴ at α = 4, 1.1·10⁻³ at α = 16). `--point-weight auto` raises the
+//!   weight as the precision measured within fine voxels ([`NoiseStats::sigma_voxels`]: the
+//!   offsets along the mean normal of the samples sharing a fine voxel, pooled over the scan
+//!   with one degree of freedom lost per voxel): `α = 4 · clamp((σ_ref/σ)², 1, 8)`
+//!   ([`auto_point_weight`]) up to 32, at and below [`NOISE_REFERENCE_VOXELS`], and lowers
+//!   it for noise beyond a voxel as the default does. It is not the default: on real scans
+//!   the spread within a voxel takes structure for precision (airborne LiDAR's vegetation
+//!   returns read 0.09 voxel and took α = 20, a rougher terrain than at 4).
+//!
+//! Both are one number per run, from every point in a fixed order: the coarse and the leaf
+//! solves, and any thread count, tile size or shard, share it. Where nothing could be
+//! measured (sparse samples) α = 4.
 
 use std::collections::HashMap;
 
 use super::fft_solve::LocalGrid;
+use crate::geom::plane_basis;
 use crate::types::floor;
 
 /// The screening weight for samples of no known noise: PoissonRecon's default `--pointWeight`.
@@ -66,8 +93,23 @@ pub const MAX_PRECISION_GAIN: f64 = 8.0;
 /// with α = 32 (α = 4: 1.4× the mean error), 0.2 voxel with α = 8 (of 4, 8, 16, 32).
 pub const NOISE_REFERENCE_VOXELS: f64 = 0.2;
 
-/// The screening weight `auto` takes for a spread `sigma` of the samples across the
-/// surface, in fine voxels (`None`: not measurable): `4 · clamp((σ_ref/σ)², 1, 8)`.
+/// The spread about local quadrics ([`NoiseStats::jet_sigma_voxels`]), in fine voxels,
+/// beyond which the weight falls as `1/σ²` (module docs): the relief spheres with noise of
+/// 0.8 voxel read 0.83 at 18 voxels' wavelength and keep α = 4; the plain sphere with
+/// noise of 1.0 voxel, which breaks into two pieces at α = 4, reads 0.96 and takes 3.1.
+pub const NOISE_LIMIT_VOXELS: f64 = 0.85;
+
+/// The factor noise beyond [`NOISE_LIMIT_VOXELS`] lowers the weight by:
+/// `min(1, (σ_lim/σ_jet)²)`, 1 where the spread was not measured.
+pub fn noise_limit(jet_sigma: Option<f64>) -> f64 {
+    match jet_sigma {
+        Some(s) if s > NOISE_LIMIT_VOXELS => (NOISE_LIMIT_VOXELS / s).powi(2),
+        _ => 1.0,
+    }
+}
+
+/// The screening weight `auto` takes for a spread `sigma` of the samples within fine voxels
+/// (`None`: not measurable), before [`noise_limit`]: `4 · clamp((σ_ref/σ)², 1, 8)`.
 pub fn auto_point_weight(sigma: Option<f64>) -> f64 {
     let gain = match sigma {
         Some(s) if s > 0.0 => (NOISE_REFERENCE_VOXELS / s).powi(2),
@@ -77,21 +119,27 @@ pub fn auto_point_weight(sigma: Option<f64>) -> f64 {
     BASE_POINT_WEIGHT * gain.clamp(1.0, MAX_PRECISION_GAIN)
 }
 
-/// `--point-weight`: a fixed α, or `auto`, chosen from the samples' noise.
+/// `--point-weight`: the default (4, lowered for noise beyond a voxel), `auto` (also raised
+/// for precise samples), or a fixed α.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum PointWeight {
-    /// Chosen per run by [`auto_point_weight`] from [`NoiseStats`].
+    /// [`BASE_POINT_WEIGHT`] times [`noise_limit`].
+    Standard,
+    /// [`auto_point_weight`] times [`noise_limit`].
     Auto,
-    /// The given α (0: the unscreened solve).
+    /// The given α (0: the unscreened solve), whatever the noise.
     Fixed(f64),
 }
 
 impl PointWeight {
-    /// The α to solve with, for samples of spread `sigma` ([`NoiseStats::sigma_voxels`];
-    /// `None`: not measured, where `auto` takes [`BASE_POINT_WEIGHT`]).
-    pub fn alpha(self, sigma: Option<f64>) -> f64 {
+    /// The α to solve with, for samples of the measured `noise`
+    /// ([`NoiseStats::default`] where nothing is measured yet).
+    pub fn alpha(self, noise: &NoiseStats) -> f64 {
         match self {
-            PointWeight::Auto => auto_point_weight(sigma),
+            PointWeight::Standard => BASE_POINT_WEIGHT * noise_limit(noise.jet_sigma_voxels()),
+            PointWeight::Auto => {
+                auto_point_weight(noise.sigma_voxels()) * noise_limit(noise.jet_sigma_voxels())
+            }
             PointWeight::Fixed(a) => a,
         }
     }
@@ -100,6 +148,7 @@ impl PointWeight {
 impl std::fmt::Display for PointWeight {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
+            PointWeight::Standard => f.write_str("standard"),
             PointWeight::Auto => f.write_str("auto"),
             PointWeight::Fixed(a) => write!(f, "{a}"),
         }
@@ -112,13 +161,64 @@ pub const NOISE_KEY_BYTES: u64 = 16;
 /// The spread of samples across the surface, pooled over fine voxels: for every voxel holding
 /// `m ≥ 2` samples, the squared offsets `((p_i − p̄)·n̄)²` from their mean along their mean
 /// normal, and its `m − 1` degrees of freedom.
+///
+/// Beside it, the spread that a voxel cannot hold: the residuals of local quadric (jet)
+/// fits over a tangential disc of [`JET_RADII_VOXELS`] around a few voxels of each batch
+/// ([`NoiseStats::jet_sigma_voxels`]). The in-voxel spread is exact for noise well under a
+/// voxel but cannot exceed `1/√12` voxel (a voxel's own spread), so it cannot tell a scan
+/// of noise 0.5 voxel from one of 2; the jet residual reads noise up to about two voxels
+/// while a quadric absorbs the surface's own curvature and relief down to a wavelength of
+/// about 8 voxels.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct NoiseStats {
     /// `Σ ((p_i − p̄)·n̄)²`, in squared fine voxels.
     pub sum_sq: f64,
     /// `Σ (m − 1)`.
     pub dof: u64,
+    /// The jet fits on the narrow and on the wide disc ([`JET_RADII_VOXELS`]).
+    pub jets: [JetStats; 2],
 }
+
+/// Jet fits pooled: their residuals, degrees of freedom and number.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct JetStats {
+    /// Summed squared residuals, in squared fine voxels.
+    pub sum_sq: f64,
+    /// `Σ (m − 6)`.
+    pub dof: u64,
+    /// Fits.
+    pub fits: u64,
+}
+
+impl JetStats {
+    fn add(&mut self, other: JetStats) {
+        self.sum_sq += other.sum_sq;
+        self.dof += other.dof;
+        self.fits += other.fits;
+    }
+}
+
+/// Narrow fits a run needs for [`NoiseStats::jet_sigma_voxels`] to read them rather than
+/// the wide ones.
+pub const JET_MIN_FITS: u64 = 64;
+
+/// The tangential radii of a jet fit's disc, in fine voxels (see [`NoiseStats`]): the
+/// narrow one holds some 25 samples at 4 per voxel of area, and a quadric on it follows a
+/// relief of 12 voxels' wavelength (its residual there reads 0.02 voxel without noise); the
+/// wide one serves samples too sparse for it (about one per voxel of area).
+pub const JET_RADII_VOXELS: [f64; 2] = [1.5, 3.0];
+
+/// How far along the normal a jet fit gathers, in fine voxels: the residuals are cut here
+/// (noise of 1.6 voxels reads 1.53, of 2.4 about 2).
+pub const JET_HEIGHT_VOXELS: f64 = 6.0;
+
+/// A jet fit is centred on every this many occupied fine voxels of a batch (a store cell), in
+/// key order, or on more where that would leave the batch under [`JET_MIN_FITS`] fits: about
+/// 20 ns a point, a few per cent of the pass that reads them.
+pub const JET_VOXELS_PER_FIT: usize = 64;
+
+/// Fewest samples a jet fit takes (six unknowns).
+pub const JET_MIN_SAMPLES: u64 = 16;
 
 impl NoiseStats {
     /// The statistics of one batch of samples (`pos`, unit normals `nrm`) on the fine voxels
@@ -166,19 +266,148 @@ impl NoiseStats {
             }
             st.dof += run.len() as u64 - 1;
         }
+        st.add_jets(pos, nrm, &keys, origin, h);
         st
+    }
+
+    /// The jet fits of [`NoiseStats::of`] over a batch whose `(key, index)` pairs `keys`
+    /// are sorted: centred on voxels at an even stride ([`JET_VOXELS_PER_FIT`]), each fit in
+    /// the frame of its centre voxel's mean sample and normal, on both discs.
+    fn add_jets(
+        &mut self,
+        pos: &[[f64; 3]],
+        nrm: &[[f32; 3]],
+        keys: &[(u64, u32)],
+        origin: [f64; 3],
+        h: f64,
+    ) {
+        // Counted first, so that the pass holds nothing beyond the keys.
+        let voxels = keys.chunk_by(|a, b| a.0 == b.0).count();
+        let stride = (voxels / JET_MIN_FITS as usize).clamp(1, JET_VOXELS_PER_FIT);
+        const MASK: u64 = (1 << 21) - 1;
+        for run in keys.chunk_by(|a, b| a.0 == b.0).step_by(stride) {
+            let m = run.len() as f64;
+            let mut c = [0f64; 3];
+            let mut n = [0f64; 3];
+            for &(_, i) in run {
+                for a in 0..3 {
+                    c[a] += (pos[i as usize][a] - origin[a]) / h / m;
+                    n[a] += nrm[i as usize][a] as f64;
+                }
+            }
+            let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+            if len < 0.5 * m {
+                continue;
+            }
+            let n = n.map(|x| x / len);
+            let (t1, t2) = plane_basis(n);
+            // The voxels of the widest cylinder's bounding box.
+            let wide = JET_RADII_VOXELS[1];
+            let mut lo = [0u64; 3];
+            let mut hi = [0u64; 3];
+            for a in 0..3 {
+                let e = wide * (1.0 - n[a] * n[a]).max(0.0).sqrt() + JET_HEIGHT_VOXELS * n[a].abs();
+                lo[a] = (c[a] - e).floor().clamp(0.0, MASK as f64) as u64;
+                hi[a] = (c[a] + e).floor().clamp(0.0, MASK as f64) as u64;
+            }
+            // Normal equations of w = a + b u + c v + d u² + e uv + f v², on each disc.
+            let mut fits = [Jet::default(); 2];
+            for x in lo[0]..=hi[0] {
+                for y in lo[1]..=hi[1] {
+                    let row = (x << 42) | (y << 21);
+                    let from = keys.partition_point(|k| k.0 < row | lo[2]);
+                    for &(k, i) in &keys[from..] {
+                        if k > row | hi[2] {
+                            break;
+                        }
+                        let p = pos[i as usize];
+                        let q = nrm[i as usize];
+                        let d = [0, 1, 2].map(|a| (p[a] - origin[a]) / h - c[a]);
+                        let w = dot(d, n);
+                        let (u, v) = (dot(d, t1), dot(d, t2));
+                        let facing = q[0] as f64 * n[0] + q[1] as f64 * n[1] + q[2] as f64 * n[2];
+                        if w.abs() > JET_HEIGHT_VOXELS || facing <= 0.0 {
+                            continue;
+                        }
+                        for (fit, r) in fits.iter_mut().zip(JET_RADII_VOXELS) {
+                            if u * u + v * v <= r * r {
+                                fit.add(u, v, w);
+                            }
+                        }
+                    }
+                }
+            }
+            for (pooled, fit) in self.jets.iter_mut().zip(&fits) {
+                if let Some((sum_sq, dof)) = fit.residual() {
+                    pooled.add(JetStats {
+                        sum_sq,
+                        dof,
+                        fits: 1,
+                    });
+                }
+            }
+        }
     }
 
     /// Pool `other` into `self`.
     pub fn add(&mut self, other: NoiseStats) {
         self.sum_sq += other.sum_sq;
         self.dof += other.dof;
+        for (a, b) in self.jets.iter_mut().zip(other.jets) {
+            a.add(b);
+        }
     }
 
     /// The spread `σ` in fine voxels, or `None` where no voxel held two samples.
     pub fn sigma_voxels(&self) -> Option<f64> {
         (self.dof > 0).then(|| (self.sum_sq / self.dof as f64).sqrt())
     }
+
+    /// The jet fits' residual spread in fine voxels: over the narrow discs where the run
+    /// made [`JET_MIN_FITS`] of them (dense samples), else over the wide ones; `None` where
+    /// no fit found enough samples.
+    pub fn jet_sigma_voxels(&self) -> Option<f64> {
+        let [narrow, wide] = self.jets;
+        let jets = if narrow.fits >= JET_MIN_FITS {
+            narrow
+        } else {
+            wide
+        };
+        (jets.dof > 0).then(|| (jets.sum_sq / jets.dof as f64).sqrt())
+    }
+}
+
+/// The normal equations of one jet fit, `w = a + b u + c v + d u² + e uv + f v²`.
+#[derive(Clone, Copy, Default)]
+struct Jet {
+    ata: nalgebra::Matrix6<f64>,
+    atb: nalgebra::Vector6<f64>,
+    btb: f64,
+    count: u64,
+}
+
+impl Jet {
+    fn add(&mut self, u: f64, v: f64, w: f64) {
+        let r = nalgebra::Vector6::new(1.0, u, v, u * u, u * v, v * v);
+        self.ata += r * r.transpose();
+        self.atb += r * w;
+        self.btb += w * w;
+        self.count += 1;
+    }
+
+    /// The least-squares fit's residual sum of squares `wᵀw − cᵀAᵀw` and its degrees of
+    /// freedom, or `None` under [`JET_MIN_SAMPLES`] or for a singular system.
+    fn residual(&self) -> Option<(f64, u64)> {
+        if self.count < JET_MIN_SAMPLES {
+            return None;
+        }
+        let coef = self.ata.cholesky()?.solve(&self.atb);
+        Some(((self.btb - coef.dot(&self.atb)).max(0.0), self.count - 6))
+    }
+}
+
+fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
 /// Samples gathered per voxel of a grid, before [`ScreenBuilder::finish`] weighs them.
@@ -422,6 +651,94 @@ mod tests {
         assert_eq!(auto_point_weight(Some(0.0)), 32.0);
         assert_eq!(auto_point_weight(Some(1.0)), BASE_POINT_WEIGHT);
         assert!((auto_point_weight(Some(0.1)) - 16.0).abs() < 1e-12);
+    }
+
+    /// `n` samples of the plane `z = 0.5 + s·h·g` over `[0, 0.5]²` (normals up), `g`
+    /// standard normal.
+    fn noisy_plane(n: usize, s: f64, h: f64, seed: u64) -> (Vec<[f64; 3]>, Vec<[f32; 3]>) {
+        use rand::{Rng, SeedableRng};
+        use rand_distr::StandardNormal;
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);
+        let pos: Vec<[f64; 3]> = (0..n)
+            .map(|_| {
+                let g: f64 = rng.sample(StandardNormal);
+                [
+                    0.5 * rng.random::<f64>(),
+                    0.5 * rng.random::<f64>(),
+                    0.5 + s * h * g,
+                ]
+            })
+            .collect();
+        (pos, vec![[0.0, 0.0, 1.0]; n])
+    }
+
+    #[test]
+    fn jets_read_the_noise_a_voxel_cannot_hold() {
+        // 20K samples on 2,500 voxels of a plane (8 a voxel): within a voxel the spread is
+        // cut at 1/√12 voxel, about quadrics it is read back up to 1.6 voxels.
+        let h = 0.01;
+        for (seed, s) in [(1, 0.0), (2, 0.5), (3, 1.0), (4, 1.6)] {
+            let (pos, nrm) = noisy_plane(20_000, s, h, seed);
+            let st = NoiseStats::of(&pos, &nrm, [0.0; 3], h);
+            let jet = st.jet_sigma_voxels().unwrap();
+            assert!((jet - s).abs() <= 0.1 * s + 1e-9, "{s}: {jet}");
+            if s >= 1.0 {
+                assert!(st.sigma_voxels().unwrap() < 0.3, "{s}: {st:?}");
+            }
+            assert!(st.jets[0].fits >= JET_MIN_FITS, "{st:?}");
+        }
+    }
+
+    #[test]
+    fn jets_follow_curvature() {
+        // A noise-free sphere of radius 20 voxels, 8 samples a voxel of its area: the
+        // quadrics leave almost nothing; a plane's fit would leave r²/(2R) ≈ 0.06 voxel.
+        use rand::{Rng, SeedableRng};
+        use rand_distr::StandardNormal;
+        let (h, r) = (0.01, 0.2);
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(9);
+        let mut pos = Vec::new();
+        let mut nrm = Vec::new();
+        for _ in 0..40_000 {
+            let d: [f64; 3] = [0; 3].map(|_| rng.sample(StandardNormal));
+            let l = dot(d, d).sqrt();
+            let n = d.map(|x| x / l);
+            pos.push([0, 1, 2].map(|a| 0.5 + r * n[a]));
+            nrm.push(n.map(|x| x as f32));
+        }
+        let st = NoiseStats::of(&pos, &nrm, [0.0; 3], h);
+        assert!(st.jet_sigma_voxels().unwrap() < 0.01, "{st:?}");
+    }
+
+    #[test]
+    fn the_weight_falls_with_noise_beyond_the_limit() {
+        let noise = |sigma: f64, jet: f64| NoiseStats {
+            sum_sq: sigma * sigma,
+            dof: 1,
+            jets: [JetStats {
+                sum_sq: jet * jet,
+                dof: 1,
+                fits: JET_MIN_FITS,
+            }; 2],
+        };
+        let unmeasured = NoiseStats::default();
+        assert_eq!(PointWeight::Standard.alpha(&unmeasured), BASE_POINT_WEIGHT);
+        assert_eq!(PointWeight::Auto.alpha(&unmeasured), BASE_POINT_WEIGHT);
+        // Up to the limit the default is 4 whatever the noise within voxels.
+        assert_eq!(PointWeight::Standard.alpha(&noise(0.05, 0.8)), 4.0);
+        assert_eq!(
+            PointWeight::Standard.alpha(&noise(0.28, NOISE_LIMIT_VOXELS)),
+            4.0
+        );
+        // Beyond it, 1/σ²: twice the limit, a quarter of the weight.
+        let twice = noise(0.28, 2.0 * NOISE_LIMIT_VOXELS);
+        assert!((PointWeight::Standard.alpha(&twice) - 1.0).abs() < 1e-12);
+        // `auto` raises for precision within voxels and lowers for noise beyond them.
+        assert!((PointWeight::Auto.alpha(&noise(0.1, 0.5)) - 16.0).abs() < 1e-12);
+        assert!((PointWeight::Auto.alpha(&noise(0.1, 1.7)) - 4.0).abs() < 1e-12);
+        // A given weight is the weight.
+        assert_eq!(PointWeight::Fixed(4.0).alpha(&twice), 4.0);
+        assert_eq!(PointWeight::Fixed(0.0).alpha(&twice), 0.0);
     }
 
     #[test]

@@ -28,6 +28,7 @@ use super::fft::Fft2;
 use super::filter::{self, Filter, FilterWork};
 use super::layout::PatchSeed;
 use super::sda::{self, Grid, SdaWork};
+use crate::geom::plane_basis;
 use crate::geom::rect::min_area_rect;
 
 /// How far a patch reaches beyond its members.
@@ -241,21 +242,6 @@ fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
         a[2] * b[0] - a[0] * b[2],
         a[0] * b[1] - a[1] * b[0],
     ]
-}
-
-/// An orthonormal pair spanning the plane normal to `n`, chosen from `n` alone.
-fn plane_basis(n: [f64; 3]) -> ([f64; 3], [f64; 3]) {
-    let a = if n[0].abs() <= n[1].abs() && n[0].abs() <= n[2].abs() {
-        [1.0, 0.0, 0.0]
-    } else if n[1].abs() <= n[2].abs() {
-        [0.0, 1.0, 0.0]
-    } else {
-        [0.0, 0.0, 1.0]
-    };
-    let u = cross(a, n);
-    let l = dot(u, u).sqrt();
-    let u = [u[0] / l, u[1] / l, u[2] / l];
-    (u, cross(n, u))
 }
 
 /// The frame of a seed's members (see the [module docs](self)). `None` for a seed too small

@@ -69,7 +69,7 @@
 //! which neither the plane nor the jet can follow), the error at the vertex is of the order
 //! of the residuals rather than of their mean, so `se` is at least half the residuals'
 //! spread beyond three times the samples' measured noise ([`fit`]'s `MISFIT_SHARE`,
-//! `NOISE_SPAN`; the noise is [`crate::recon::screen::NoiseStats`]'s): there the screened
+//! `NOISE_SPAN`; the noise is the in-voxel spread of [`crate::recon::screen::NoiseStats`]): there the screened
 //! field, already through the samples, is kept (a relief of 8 voxels' wavelength:
 //! 6.9·10⁻⁴ → 5.5·10⁻⁴), while residuals that noise explains leave the fit as it was. A vertex
 //! moves only where its nearest point is within two voxels and its plane within two voxels,

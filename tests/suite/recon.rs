@@ -557,10 +557,11 @@ fn same_mesh_for_any_thread_count_under_a_tight_budget() {
 }
 
 #[test]
-fn auto_screening_weight_follows_the_noise() {
-    // `--point-weight auto` measures the samples' spread across the surface:
-    // precise samples are screened with the largest weight, noisy ones (2 voxels here) with
-    // PoissonRecon's 4; a given weight is used as it is. The summary names weight and noise.
+fn the_screening_weight_follows_the_noise() {
+    // The default (`standard`) screens with PoissonRecon's 4 and lowers it as 1/σ² for noise
+    // across the surface beyond 0.85 voxel (2 voxels here: about (0.85/2)² of it); `auto`
+    // also raises it for precise samples, to 32; a given weight is used as it is. The
+    // summary names the weight and the noise (within voxels, about local quadrics).
     let d = tempfile::tempdir().unwrap();
     let weight = |summary: &str| {
         let at = summary.find("--point-weight ").expect(summary) + "--point-weight ".len();
@@ -568,25 +569,36 @@ fn auto_screening_weight_follows_the_noise() {
             .chars()
             .take_while(|c| c.is_ascii_digit() || *c == '.')
             .collect();
-        (w.parse::<f64>().unwrap(), summary[at..].contains("voxel)"))
+        let noise = summary[at..].contains("voxel within a voxel")
+            && summary[at..].contains("about local quadrics)");
+        (w.parse::<f64>().unwrap(), noise)
     };
-    for (noise, want) in [(0.0, 32.0), (0.01, 4.0)] {
+    let mut plys = Vec::new();
+    for noise in [0.0, 0.01] {
         let sub = d.path().join(format!("n{noise}"));
         std::fs::create_dir(&sub).unwrap();
-        let ply = synth(&sub, "sphere", 40_000, noise);
-        let out = sub.join("o.ply");
-        let got = weight(&recon(
-            &ply,
-            &out,
-            &["--depth", "7", "--point-weight", "auto"],
-        ));
-        assert_eq!(got, (want, true), "noise {noise}");
+        plys.push(synth(&sub, "sphere", 40_000, noise));
     }
-    let ply = d.path().join("n0").join("sphere.ply");
-    let out = d.path().join("fixed.ply");
-    let got = weight(&recon(&ply, &out, &["--depth", "7", "--point-weight", "6"]));
-    // The noise is measured all the same (the vertex fit uses it).
-    assert_eq!(got, (6.0, true));
+    let cases: [(usize, &[&str], std::ops::RangeInclusive<f64>); 5] = [
+        (0, &[], 4.0..=4.0),
+        (0, &["--point-weight", "auto"], 32.0..=32.0),
+        (1, &[], 0.5..=1.2),
+        (1, &["--point-weight", "auto"], 0.5..=1.2),
+        (1, &["--point-weight", "6"], 6.0..=6.0),
+    ];
+    for (i, (ply, args, want)) in cases.into_iter().enumerate() {
+        let out = d.path().join(format!("o{i}.ply"));
+        let args: Vec<&str> = ["--depth", "7"]
+            .into_iter()
+            .chain(args.iter().copied())
+            .collect();
+        let (w, measured) = weight(&recon(&plys[ply], &out, &args));
+        // The noise is measured whatever the weight (the vertex fit uses it).
+        assert!(
+            want.contains(&w) && measured,
+            "{args:?}: --point-weight {w}"
+        );
+    }
 }
 
 /// Sampling-density weights (`recon::density`): a sphere whose x < 0 half keeps only every
