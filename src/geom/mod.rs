@@ -8,5 +8,5 @@
 pub mod frame;
 pub mod rect;
 
-pub use frame::plane_basis;
+pub use frame::{cross, dot, plane_basis};
 pub use rect::{Rect, RectWorkspace, min_area_rect, min_area_rect_with};

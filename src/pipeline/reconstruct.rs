@@ -248,7 +248,7 @@ pub fn reconstruct(
     let mut coarse = coarse_pass(store, &plan, params.point_weight, ctx)?;
     // The weight the coarse solve used, for every leaf (`auto` measures it there).
     plan.point_weight = coarse.point_weight;
-    plan.noise_voxels = coarse.noise_voxels;
+    plan.noise_voxels = coarse.noise.sigma_voxels();
     let point_cap = ctx
         .budget
         .share(Share::PointCache)
@@ -305,8 +305,8 @@ pub fn reconstruct(
         tiles_total: nonempty.len(),
         iso: leaves.iso,
         point_weight: plan.point_weight,
-        noise_voxels: coarse.noise_voxels,
-        jet_noise_voxels: coarse.jet_noise_voxels,
+        noise_voxels: plan.noise_voxels,
+        jet_noise_voxels: coarse.noise.jet_sigma_voxels(),
         coarse_iterations: coarse.iterations,
         leaves_solved: leaves.solved,
         leaf_iterations: leaves.iterations,
@@ -440,12 +440,10 @@ struct CoarsePass {
     occupied: BTreeSet<CellKey>,
     support: Support,
     iterations: u32,
-    /// The screening weight of the run (`auto`'s choice, or the one given).
+    /// The screening weight of the run (`standard`'s or `auto`'s choice, or the one given).
     point_weight: f64,
-    /// The samples' spread across the surface, where one could be measured.
-    noise_voxels: Option<f64>,
-    /// The samples' spread about local quadric fits, where one could be measured.
-    jet_noise_voxels: Option<f64>,
+    /// The samples' noise, measured beside the splat.
+    noise: NoiseStats,
 }
 
 /// The next wave of store cells from `*i` (advanced past them): at most `wave` cells, within
@@ -576,8 +574,6 @@ fn coarse_pass(store: &Store, plan: &Plan, weight: PointWeight, ctx: &Ctx) -> Re
     stage.finish(None);
     moments.check_not_flat(&store.dir)?;
     let stage = ctx.progress.stage("coarse", None, "solves");
-    let noise_voxels = noise.sigma_voxels();
-    let jet_noise_voxels = noise.jet_sigma_voxels();
     let point_weight = weight.alpha(&noise);
     let screen = screen.finish(point_weight);
     let (field, conv) = ctx.pool.install(|| solve_coarse(plan, v, &screen));
@@ -599,8 +595,7 @@ fn coarse_pass(store: &Store, plan: &Plan, weight: PointWeight, ctx: &Ctx) -> Re
         support,
         iterations: conv.iterations,
         point_weight,
-        noise_voxels,
-        jet_noise_voxels,
+        noise,
     })
 }
 

@@ -77,7 +77,7 @@
 use std::collections::HashMap;
 
 use super::fft_solve::LocalGrid;
-use crate::geom::plane_basis;
+use crate::geom::{dot, plane_basis};
 use crate::types::floor;
 
 /// The screening weight for samples of no known noise: PoissonRecon's default `--pointWeight`.
@@ -230,14 +230,8 @@ impl NoiseStats {
             .iter()
             .enumerate()
             .map(|(i, p)| {
-                let mut key = 0u64;
-                for a in 0..3 {
-                    let v = ((p[a] - origin[a]) / h)
-                        .floor()
-                        .clamp(0.0, (1u64 << 21) as f64 - 1.0);
-                    key = (key << 21) | v as u64;
-                }
-                (key, i as u32)
+                let v = [0, 1, 2].map(|a| voxel_index((p[a] - origin[a]) / h));
+                (voxel_key(v), i as u32)
             })
             .collect();
         keys.sort_unstable();
@@ -246,20 +240,9 @@ impl NoiseStats {
             if run.len() < 2 {
                 continue;
             }
-            let m = run.len() as f64;
-            let mut c = [0f64; 3];
-            let mut n = [0f64; 3];
-            for &(_, i) in run {
-                for a in 0..3 {
-                    c[a] += pos[i as usize][a] / m;
-                    n[a] += nrm[i as usize][a] as f64;
-                }
-            }
-            let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
-            // Samples of opposite sides in one voxel (a thin sheet) say nothing of the noise.
-            if len < 0.5 * m {
+            let Some((c, n, len)) = voxel_mean(run, pos, nrm) else {
                 continue;
-            }
+            };
             for &(_, i) in run {
                 let p = pos[i as usize];
                 let d: f64 = (0..3).map(|a| (p[a] - c[a]) * n[a] / len).sum::<f64>() / h;
@@ -285,21 +268,12 @@ impl NoiseStats {
         // Counted first, so that the pass holds nothing beyond the keys.
         let voxels = keys.chunk_by(|a, b| a.0 == b.0).count();
         let stride = (voxels / JET_MIN_FITS as usize).clamp(1, JET_VOXELS_PER_FIT);
-        const MASK: u64 = (1 << 21) - 1;
         for run in keys.chunk_by(|a, b| a.0 == b.0).step_by(stride) {
-            let m = run.len() as f64;
-            let mut c = [0f64; 3];
-            let mut n = [0f64; 3];
-            for &(_, i) in run {
-                for a in 0..3 {
-                    c[a] += (pos[i as usize][a] - origin[a]) / h / m;
-                    n[a] += nrm[i as usize][a] as f64;
-                }
-            }
-            let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
-            if len < 0.5 * m {
+            let Some((c, n, len)) = voxel_mean(run, pos, nrm) else {
                 continue;
-            }
+            };
+            // The fit's frame, in fine voxels from `origin`.
+            let c = [0, 1, 2].map(|a| (c[a] - origin[a]) / h);
             let n = n.map(|x| x / len);
             let (t1, t2) = plane_basis(n);
             // The voxels of the widest cylinder's bounding box.
@@ -308,25 +282,24 @@ impl NoiseStats {
             let mut hi = [0u64; 3];
             for a in 0..3 {
                 let e = wide * (1.0 - n[a] * n[a]).max(0.0).sqrt() + JET_HEIGHT_VOXELS * n[a].abs();
-                lo[a] = (c[a] - e).floor().clamp(0.0, MASK as f64) as u64;
-                hi[a] = (c[a] + e).floor().clamp(0.0, MASK as f64) as u64;
+                lo[a] = voxel_index(c[a] - e);
+                hi[a] = voxel_index(c[a] + e);
             }
             // Normal equations of w = a + b u + c v + d u² + e uv + f v², on each disc.
             let mut fits = [Jet::default(); 2];
             for x in lo[0]..=hi[0] {
                 for y in lo[1]..=hi[1] {
-                    let row = (x << 42) | (y << 21);
-                    let from = keys.partition_point(|k| k.0 < row | lo[2]);
+                    let (first, last) = (voxel_key([x, y, lo[2]]), voxel_key([x, y, hi[2]]));
+                    let from = keys.partition_point(|k| k.0 < first);
                     for &(k, i) in &keys[from..] {
-                        if k > row | hi[2] {
+                        if k > last {
                             break;
                         }
                         let p = pos[i as usize];
-                        let q = nrm[i as usize];
                         let d = [0, 1, 2].map(|a| (p[a] - origin[a]) / h - c[a]);
                         let w = dot(d, n);
                         let (u, v) = (dot(d, t1), dot(d, t2));
-                        let facing = q[0] as f64 * n[0] + q[1] as f64 * n[1] + q[2] as f64 * n[2];
+                        let facing = dot(nrm[i as usize].map(f64::from), n);
                         if w.abs() > JET_HEIGHT_VOXELS || facing <= 0.0 {
                             continue;
                         }
@@ -407,8 +380,40 @@ impl Jet {
     }
 }
 
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+/// Bits of a fine voxel's index per axis in [`NoiseStats::of`]'s keys.
+const KEY_BITS: u32 = 21;
+
+/// The fine voxel holding offset `u` (in voxels from the origin) along one axis, clamped to
+/// the keys' range.
+fn voxel_index(u: f64) -> u64 {
+    u.floor().clamp(0.0, ((1u64 << KEY_BITS) - 1) as f64) as u64
+}
+
+/// The key of the fine voxel `v`: `x, y, z` from the most significant bits down, so that
+/// keys sort by `x`, then `y`, then `z` (a column of `z` is one key range).
+fn voxel_key(v: [u64; 3]) -> u64 {
+    (((v[0] << KEY_BITS) | v[1]) << KEY_BITS) | v[2]
+}
+
+/// The mean position of the samples `run` of one voxel, the sum of their normals and its
+/// length; `None` where the normals nearly cancel: samples of opposite sides in one voxel
+/// (a thin sheet) say nothing of the noise.
+fn voxel_mean(
+    run: &[(u64, u32)],
+    pos: &[[f64; 3]],
+    nrm: &[[f32; 3]],
+) -> Option<([f64; 3], [f64; 3], f64)> {
+    let m = run.len() as f64;
+    let mut c = [0f64; 3];
+    let mut n = [0f64; 3];
+    for &(_, i) in run {
+        for a in 0..3 {
+            c[a] += pos[i as usize][a] / m;
+            n[a] += nrm[i as usize][a] as f64;
+        }
+    }
+    let len = dot(n, n).sqrt();
+    (len >= 0.5 * m).then_some((c, n, len))
 }
 
 /// Samples gathered per voxel of a grid, before [`ScreenBuilder::finish`] weighs them.

@@ -28,8 +28,8 @@ use super::fft::Fft2;
 use super::filter::{self, Filter, FilterWork};
 use super::layout::PatchSeed;
 use super::sda::{self, Grid, SdaWork};
-use crate::geom::plane_basis;
 use crate::geom::rect::min_area_rect;
+use crate::geom::{cross, dot, plane_basis};
 
 /// How far a patch reaches beyond its members.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -229,20 +229,6 @@ impl Default for PatchWork {
 /// Patches with fewer members than this are too small to approximate: their points pass
 /// through unchanged.
 pub const MIN_MEMBERS: usize = 6;
-
-#[inline]
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-#[inline]
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
 
 /// The frame of a seed's members (see the [module docs](self)). `None` for a seed too small
 /// to approximate.
