@@ -294,12 +294,7 @@ impl<'a> PointSource<'a> {
         for _ in 0..=NEAR_POINTS_WIDENINGS {
             let bx = Aabb { min: lo, max: hi }.grown(m);
             for k in self.keys_in(&bx) {
-                self.visit(k, &bx, |sc, j| {
-                    out.pos.push(sc.pos[j]);
-                    let c = sc.col.get(j).copied().unwrap_or([0; 4]);
-                    out.col.push([c[0], c[1], c[2]]);
-                    out.inten.push(sc.inten.get(j).copied().unwrap_or(0.0));
-                })?;
+                self.visit(k, &bx, |sc, j| take(&mut out, sc, j))?;
             }
             out.lo = bx.min;
             out.hi = bx.max;
@@ -308,6 +303,29 @@ impl<'a> PointSource<'a> {
             }
             m *= 2.0;
         }
+        Ok(out)
+    }
+
+    /// The points (with their colours) within Euclidean distance `reach` of the box `lo..hi`
+    /// (world): the ball around each point of the box, not the box grown by `reach` along
+    /// every axis. For vertices far below a terrain (a closed surface's underside) the grown
+    /// box holds a square of ground as wide as their distance to it, and the rounded one only
+    /// the patch their nearest points can come from.
+    pub fn points_within(&mut self, lo: [f64; 3], hi: [f64; 3], reach: f64) -> Result<NearPoints> {
+        let mut out = NearPoints::default();
+        let bx = Aabb { min: lo, max: hi }.grown(reach);
+        let r2 = reach * reach;
+        for k in self.keys_in(&bx) {
+            self.visit(k, &bx, |sc, j| {
+                let p = sc.pos[j];
+                let gap = |a: usize| (lo[a] - p[a]).max(p[a] - hi[a]).max(0.0);
+                if gap(0).powi(2) + gap(1).powi(2) + gap(2).powi(2) <= r2 {
+                    take(&mut out, sc, j);
+                }
+            })?;
+        }
+        out.lo = bx.min;
+        out.hi = bx.max;
         Ok(out)
     }
 
@@ -330,4 +348,12 @@ impl<'a> PointSource<'a> {
         own.nrm.extend(rest.nrm);
         Ok(own)
     }
+}
+
+/// Point `j` of `sc`, with its colour and intensity, into `out`.
+fn take(out: &mut NearPoints, sc: &SortedCell, j: usize) {
+    out.pos.push(sc.pos[j]);
+    let c = sc.col.get(j).copied().unwrap_or([0; 4]);
+    out.col.push([c[0], c[1], c[2]]);
+    out.inten.push(sc.inten.get(j).copied().unwrap_or(0.0));
 }

@@ -672,8 +672,9 @@ fn fit_tile(
     let density = job.params.measures_density();
     let (mut fits, inexact) = cp.fit_vertices(&mesh.positions, &mesh.keys, &geom, fit, density);
     // Vertices whose neighbours may lie beyond the gathered box: their true neighbours lie
-    // within their current farthest one, so one wider gather around them is exact (rare:
-    // vertices far from every point).
+    // within their current farthest one, so one wider gather, of the points within the
+    // largest such reach of their bounding box, is exact (rare: vertices far from every
+    // point).
     if let (false, Some(src)) = (inexact.is_empty(), points.as_ref()) {
         let reach = inexact.iter().map(|&i| fits[i].reach).fold(0.0, f64::max);
         let mut lo = [f64::INFINITY; 3];
@@ -692,7 +693,7 @@ fn fit_tile(
             [0, 1, 2].map(|a| hi[a] + o[a]),
         );
         let wide = to_local(
-            lock(src)?.near_points(lo, hi, reach * (1.0 + 1e-9) + h * 1e-6)?,
+            lock(src)?.points_within(lo, hi, reach * (1.0 + 1e-9) + h * 1e-6)?,
             o,
         );
         let (fixed, _) = wide.fit_vertices(&vs, &ks, &geom, fit, density);
