@@ -5,7 +5,7 @@
 //! nearest lie in the first shell or two), but a query far from the points (the closed
 //! surface's side away from a terrain scan, say) must sweep every cell of a cube whose
 //! radius is its distance to the points, and sort every point in it. After
-//! [`GRID_SHELLS`] shells without an answer the query goes to a k-d tree instead, built once
+//! `GRID_SHELLS` shells without an answer the query goes to a k-d tree instead, built once
 //! per grid on first need, whose search visits only the boxes the ball of the k-th nearest
 //! point meets. Both give the exact k nearest with the same order (squared distance, then
 //! index) and the same distance arithmetic, so which one answered never shows in the result.
