@@ -2,12 +2,13 @@
 # Scale: one big run per line, each with its time, peak resident memory and two-sided distance
 # to the exact surface, and the per-stage rates a plan for a billion points is made from.
 #
-#   scripts/bench_scale.sh                         # 10M-point sphere, depth 10, --mem 1G, 128M
+#   scripts/bench_scale.sh                         # a LiDAR terrain at depths 10 and 11; a
+#                                                  # 10M-point sphere, depth 10, --mem 1G, 128M
 #   BIG=1 scripts/bench_scale.sh                   # also 100M points, depth 11 and 12, --mem 4G
 #   SHARDS=3 scripts/bench_scale.sh                # also the 10M run as 3 concurrent shards + merge
 #
-# Every line: the same points (a synth sphere, noise 0.0005 of the diagonal), THREADS threads
-# (default: all cores), a warm page cache. The rates come from the JSON progress lines (the
+# The sphere lines: the same points (a synth sphere, noise 0.0005 of the diagonal); every line
+# THREADS threads (default: all cores), a warm page cache. The rates come from the JSON progress lines (the
 # `done` line of each stage: items and seconds).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -67,6 +68,28 @@ recon() {  # recon N DEPTH MEM
   rm -f "$DIR/$label.ply"
 }
 
+# terrain DEPTH [--trim]: the Autzen LiDAR tile (real, 110K points, normals estimated), closed
+# or trimmed. Closed, the surface's underside lies tens of voxels below the ground, far from
+# every point: what the vertex fit's nearest-point search must stay fast on (at depth 10 the
+# tile stage ran at 2 tiles a second before the search took a k-d tree for such vertices).
+terrain() {
+  local depth=$1 trim=${2:-} label="autzen_d$1${2:+_trim}"
+  run "$label" "$BIN" reconstruct "$LAS" -o "$DIR/$label.ply" --depth "$depth" $trim --mem 4G \
+    --threads "$THREADS" --progress json
+  line "$label" "$(python3 -c 'import json, sys
+print(next(j["done"] for j in map(json.loads, filter(lambda l: l.startswith("{"), open(sys.argv[1])))
+           if j.get("stage") == "count" and j.get("state") == "done"))' "$DIR/$label.log")" - -
+  rm -f "$DIR/$label.ply"
+}
+
+LAS=${LAS:-../shared/data/lidar/autzen_trim.las}
+if [ -f "$LAS" ]; then
+  terrain 10
+  terrain 10 --trim
+  terrain 11
+else
+  echo "terrain: $LAS is absent, skipped"
+fi
 sphere 10000000
 recon 10000000 10 1G
 recon 10000000 10 128M
