@@ -59,6 +59,7 @@
 use crate::hex::mesh::HexMesh;
 use crate::hex::quality::{HEX_EDGES, HEX_FACES, hex_scaled_jacobian};
 use crate::hex::untangle::{Freedom, UntangleParams, UntangleReport, untangle_hexes};
+use crate::types::Aabb;
 use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -375,12 +376,11 @@ impl Bvh {
     }
 
     fn box_dist2(n: &BvhNode, p: [f64; 3]) -> f64 {
-        let mut d = 0.0;
-        for k in 0..3 {
-            let e = (n.lo[k] - p[k]).max(0.0).max(p[k] - n.hi[k]);
-            d += e * e;
+        Aabb {
+            min: n.lo,
+            max: n.hi,
         }
-        d
+        .dist2(p)
     }
 
     /// The closest point to `p` on the triangles and its squared distance; `None` without

@@ -313,13 +313,12 @@ impl<'a> PointSource<'a> {
     /// the patch their nearest points can come from.
     pub fn points_within(&mut self, lo: [f64; 3], hi: [f64; 3], reach: f64) -> Result<NearPoints> {
         let mut out = NearPoints::default();
-        let bx = Aabb { min: lo, max: hi }.grown(reach);
+        let inner = Aabb { min: lo, max: hi };
+        let bx = inner.grown(reach);
         let r2 = reach * reach;
         for k in self.keys_in(&bx) {
             self.visit(k, &bx, |sc, j| {
-                let p = sc.pos[j];
-                let gap = |a: usize| (lo[a] - p[a]).max(p[a] - hi[a]).max(0.0);
-                if gap(0).powi(2) + gap(1).powi(2) + gap(2).powi(2) <= r2 {
+                if inner.dist2(sc.pos[j]) <= r2 {
                     take(&mut out, sc, j);
                 }
             })?;

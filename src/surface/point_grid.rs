@@ -11,12 +11,16 @@
 //! index) and the same distance arithmetic, so which one answered never shows in the result.
 
 use std::cell::OnceCell;
+use std::cmp::Ordering;
+
+use crate::types::Aabb;
 
 /// Shells of grid cells swept before a query goes to the k-d tree. Measured on the Autzen
 /// LiDAR tile (110K points, depth 10), whose closed surface's underside lies 30–70 voxels
 /// below the ground: the tile stage ran at 2 tiles a second with the grid alone (of 886),
-/// and took 11.8 s with the tree after 3 shells (12.3 s after 2); on a 1M-point sphere at depth 9, where every query is
-/// near, 3 shells left the tile stage as it was (2.5–3.9 s, run to run).
+/// and took 11.8 s with the tree after 3 shells (12.3 s after 2); on a 1M-point sphere at
+/// depth 9, where every query is near, 3 shells left the tile stage as it was (2.5–3.9 s,
+/// run to run).
 const GRID_SHELLS: i64 = 3;
 
 /// Points in a k-d tree's leaf.
@@ -143,7 +147,7 @@ impl<'a> PointGrid<'a> {
                 }
             }
             // Keep the k best seen: a point not among them cannot be among the k nearest.
-            let by = |a: &(f64, u32), b: &(f64, u32)| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1));
+            let by = |a: &(f64, u32), b: &(f64, u32)| order(*a, *b);
             if out.len() > k {
                 out.select_nth_unstable_by(k - 1, by);
                 out.truncate(k);
@@ -183,8 +187,7 @@ struct KdTree {
 
 struct KdNode {
     /// The node's points' bounding box.
-    lo: [f64; 3],
-    hi: [f64; 3],
+    bx: Aabb,
     /// Its points, `perm[start..end]`.
     start: u32,
     end: u32,
@@ -193,12 +196,10 @@ struct KdNode {
 }
 
 impl KdNode {
-    /// A lower bound on `dist2(p, q)` for every point `p` of the node: per axis the
-    /// squared distance to the box, summed in `dist2`'s order (rounding is monotone, so it
-    /// stays a lower bound in floats).
+    /// A lower bound on `dist2(p, q)` for every point `p` of the node, in floats too
+    /// ([`Aabb::dist2`] sums in `dist2`'s order).
     fn bound(&self, q: [f64; 3]) -> f64 {
-        let gap = |a: usize| (self.lo[a] - q[a]).max(q[a] - self.hi[a]).max(0.0);
-        gap(0).powi(2) + gap(1).powi(2) + gap(2).powi(2)
+        self.bx.dist2(q)
     }
 }
 
@@ -215,25 +216,20 @@ impl KdTree {
     /// Builds the node over `perm[start..end]` and returns its index.
     fn build(&mut self, pos: &[[f64; 3]], start: usize, end: usize) -> u32 {
         let range = &mut self.perm[start..end];
-        let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+        let mut bx = Aabb::EMPTY;
         for &i in range.iter() {
-            for a in 0..3 {
-                lo[a] = lo[a].min(pos[i as usize][a]);
-                hi[a] = hi[a].max(pos[i as usize][a]);
-            }
+            bx.add(pos[i as usize]);
         }
         let me = self.nodes.len() as u32;
         self.nodes.push(KdNode {
-            lo,
-            hi,
+            bx,
             start: start as u32,
             end: end as u32,
             halves: None,
         });
         if end - start > KD_LEAF {
-            let axis = (0..3)
-                .max_by(|&a, &b| (hi[a] - lo[a]).total_cmp(&(hi[b] - lo[b])))
-                .unwrap_or(0);
+            let e = bx.extent();
+            let axis = (0..3).max_by(|&a, &b| e[a].total_cmp(&e[b])).unwrap_or(0);
             let mid = range.len() / 2;
             range.select_nth_unstable_by(mid, |&a, &b| {
                 pos[a as usize][axis]
@@ -264,10 +260,10 @@ impl KdTree {
                 None => {
                     for &i in &self.perm[n.start as usize..n.end as usize] {
                         let e = (dist2(pos[i as usize], q), i);
-                        if out.len() == k && !less(e, out[k - 1]) {
+                        if out.len() == k && order(e, out[k - 1]).is_ge() {
                             continue;
                         }
-                        let at = out.partition_point(|x| less(*x, e));
+                        let at = out.partition_point(|x| order(*x, e).is_lt());
                         out.insert(at, e);
                         out.truncate(k);
                     }
@@ -292,8 +288,8 @@ impl KdTree {
 }
 
 /// The order both searches rank points in: squared distance, then index.
-fn less(a: (f64, u32), b: (f64, u32)) -> bool {
-    a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)).is_lt()
+fn order(a: (f64, u32), b: (f64, u32)) -> Ordering {
+    a.0.total_cmp(&b.0).then(a.1.cmp(&b.1))
 }
 
 #[cfg(test)]

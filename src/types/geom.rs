@@ -59,6 +59,16 @@ impl Aabb {
         (0..3).all(|i| p[i] >= self.min[i] && p[i] <= self.max[i])
     }
 
+    /// The squared distance from `p` to the box (0 inside): per axis the gap to the box,
+    /// squared, summed over the axes in order. Each term is at most the like term of any
+    /// point of the box, and rounding is monotone, so in floats too it is at most
+    /// `Σ_a (x_a − p_a)²` (summed in that order) for every `x` in the box.
+    #[inline]
+    pub fn dist2(&self, p: [f64; 3]) -> f64 {
+        let gap = |a: usize| (self.min[a] - p[a]).max(p[a] - self.max[a]).max(0.0);
+        gap(0).powi(2) + gap(1).powi(2) + gap(2).powi(2)
+    }
+
     /// True when the two boxes share a point.
     pub fn meets(&self, o: &Aabb) -> bool {
         (0..3).all(|i| self.min[i] <= o.max[i] && o.min[i] <= self.max[i])
