@@ -11,6 +11,10 @@
 #   scripts/bench_ingest.sh            # N=100000000 MEM=1G
 #   N=10000000 MEM=256M scripts/bench_ingest.sh
 #   KEEP=1 DIR=/data/bench scripts/bench_ingest.sh   # reuse/keep the input file
+#
+# Then the split ingest (`ingest --shard I/G`, G=SPLIT tasks, default 2, run together here
+# with the cores shared out): its time, points/s and ratio to one process, and a check that
+# its store holds the same cells (keys, counts, bounds) as one process's. SPLIT=0 skips it.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 N=${N:-100000000}
@@ -23,7 +27,8 @@ cargo build --release --quiet
 BIN=$PWD/target/release/scanflow
 PLY=$DIR/bench_$N.ply
 STORE=$DIR/bench_$N.store
-cleanup() { rm -rf "$STORE"; [ -n "${KEEP:-}" ] || rm -f "$PLY" "${PLY%.ply}.truth.json"; }
+SPLIT=${SPLIT:-2}
+cleanup() { rm -rf "$STORE" "$STORE.split" "$STORE.work"; [ -n "${KEEP:-}" ] || rm -f "$PLY" "${PLY%.ply}.truth.json"; }
 trap cleanup EXIT
 if [ ! -f "$PLY" ]; then
   echo "synthesising $N points into $PLY"
@@ -54,6 +59,26 @@ done
 ING=$(printf '%s\n' "${TIMES[@]}" | sort -g | awk '{a[NR]=$1} END {print a[int((NR + 1) / 2)]}')
 PEAK=$(python3 -c 'import json,sys; print(max(json.loads(l).get("peak_rss_bytes",0) for l in open(sys.argv[1]) if l.startswith("{")))' "$LOG")
 MEMB=$("$BIN" info "$STORE" --json | python3 -c 'import json,sys; print(json.load(sys.stdin)["store_bytes"])')
+
+if [ "$SPLIT" -gt 0 ]; then
+  cores=$(nproc); per=$(( (THREADS > 0 ? THREADS : cores) / SPLIT )); [ "$per" -ge 1 ] || per=1
+  rm -rf "$STORE.split" "$STORE.work"; sync
+  t0=$(now)
+  for i in $(seq 0 $((SPLIT - 1))); do
+    "$BIN" ingest "$PLY" -o "$STORE.split" --shard "$i/$SPLIT" --work-dir "$STORE.work" \
+      --mem "$MEM" --threads "$per" --progress none > /dev/null &
+  done
+  wait
+  t1=$(now)
+  SPLIT_T=$(echo "$t1 - $t0" | bc -l)
+  python3 - "$STORE" "$STORE.split" "$N" "$ING" "$SPLIT_T" "$SPLIT" "$per" <<'PY'
+import json, sys
+a, b = (json.load(open(p + "/manifest.json")) for p in sys.argv[1:3])
+n, one, split, g, per = int(sys.argv[3]), float(sys.argv[4]), float(sys.argv[5]), sys.argv[6], sys.argv[7]
+same = [(c["key"], c["count"], c["bounds"]) for c in a["cells"]] == [(c["key"], c["count"], c["bounds"]) for c in b["cells"]]
+print(f"split ingest    {split:8.2f} s   {n / split / 1e6:7.1f} M points/s with {g} tasks of {per} threads together: {split / one:.2f}x one process's time; cells {'the same' if same else 'DIFFER'}")
+PY
+fi
 
 python3 - "$N" "$BYTES" "$CAT" "$ING" "$PEAK" "$MEM" "$MEMB" "$DISK" <<'PY'
 import sys

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The cluster test: a real one-node SLURM cluster on localhost (local_cluster.sh) runs a
-# reconstruction as submit.sh submits it (ingest, an array of 3 shards, merge chained by
-# afterok), and the merged mesh must be byte-identical to one process's. Then the same run
+# reconstruction as submit.sh submits it (an ingest array of 3 tasks, an array of 3 shards,
+# merge, chained by afterok), and the store and the merged mesh must be those of one
+# process. Then the same run
 # again with one array task requeued while it runs (scontrol requeue: SLURM kills it and
 # starts it again), which must still give the same bytes.
 #
@@ -50,8 +51,12 @@ out=$("$here/submit.sh" -n 3 -d scratch -o sharded.ply -m $mem -c 1 -b "$bin" -r
 echo "$out"
 wait_job "$(job_of "$out" merge)" 300
 check_same sharded.ply
+[ ! -e scratch/ingest-work ] || { echo "FAIL: the ingest left its work directory" >&2; exit 1; }
+# The split store holds the cells (keys, counts, bounds) of one process's store.
+cells() { python3 -c "import json,sys; m=json.load(open(sys.argv[1])); print(m['point_count'], [(c['key'], c['count'], c['bounds']) for c in m['cells']])" "$1"; }
+[ "$(cells scratch/store/manifest.json)" = "$(cells ref.store/manifest.json)" ] || { echo "FAIL: the split ingest's cells differ from one process's" >&2; exit 1; }
 [ ! -e scratch/work ] || { echo "FAIL: merge left the work directory:" >&2; ls -laR scratch/work | head -20 >&2; cat scratch/logs/merge-* >&2; exit 1; }
-echo "slurm: 3 shards merged into the single-process bytes"
+echo "slurm: 3 ingest tasks and 3 shards merged into the single-process bytes"
 
 # 2. The store is reused; shard 1 is requeued while it runs.
 out=$("$here/submit.sh" -n 3 -d scratch -o requeued.ply -m $mem -c 1 -b "$bin" -r "$opts")

@@ -556,6 +556,17 @@ pub struct IngestArgs {
     /// zstd level of cell files (-7 fastest .. 19 smallest).
     #[arg(long, default_value_t = IngestParams::default().zstd_level, allow_negative_numbers = true)]
     pub zstd_level: i32,
+    /// Do one slice of the ingest, as one task of a cluster array job sharing --work-dir with
+    /// the others: I/N (shard I of N, from 0), auto (SLURM's SLURM_ARRAY_TASK_ID and _COUNT)
+    /// or auto/N (the index from SLURM, JOB_COMPLETION_INDEX under Kubernetes or
+    /// AWS_BATCH_JOB_ARRAY_INDEX). Whichever task finds the last slice done writes the store.
+    /// Give every task the same inputs and options, --mem included.
+    #[arg(long, value_name = "I/N|auto|auto/N")]
+    pub shard: Option<String>,
+    /// Work directory the tasks of a split ingest (--shard) share, on a file system they all
+    /// see (default: OUTPUT.work); removed once the store is written.
+    #[arg(long)]
+    pub work_dir: Option<PathBuf>,
     /// Normal options.
     #[command(flatten)]
     pub normal: NormalOpts,

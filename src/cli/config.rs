@@ -300,6 +300,8 @@ pub struct IngestConfig {
     pub output: PathBuf,
     /// Cell size, invalid points, compression, normals.
     pub params: IngestParams,
+    /// `--shard`, with the work directory the tasks share.
+    pub split: Option<(Shard, PathBuf)>,
 }
 
 impl IngestConfig {
@@ -314,12 +316,30 @@ impl IngestConfig {
         }
         let run = RunConfig::new(&a.common)?;
         let inputs = Inputs::new(a.inputs, a.conf, &a.normal.viewpoint)?;
-        paths::new_dir(&a.output)?;
+        let split = match &a.shard {
+            Some(text) => {
+                let shard = Shard::parse(text, |k| std::env::var(k).ok())?;
+                // Another task may have written the store already: the ingest checks it.
+                paths::writable_parent(&a.output)?;
+                Some((shard, work_dir(a.work_dir, &a.output)?))
+            }
+            None => {
+                if let Some(w) = &a.work_dir {
+                    bail!(
+                        "--work-dir {}: only a split ingest (--shard) has a work directory; one process builds the store beside -o",
+                        w.display()
+                    );
+                }
+                paths::new_dir(&a.output)?;
+                None
+            }
+        };
         paths::not_an_input(&a.output, &inputs.paths())?;
         let normals = NormalsConfig::new(&a.normal)?;
         Ok(IngestConfig {
             run,
             inputs,
+            split,
             output: a.output,
             params: IngestParams {
                 max_cell_points: a.max_cell_points,

@@ -4,6 +4,7 @@ use anyhow::{Result, bail};
 
 use scanflow::exec::Ctx;
 use scanflow::io::InputSpec;
+use scanflow::pipeline::ingest_split::{SplitOutcome, ingest_split};
 use scanflow::types::Viewpoint;
 
 use super::config::{IngestConfig, Inputs};
@@ -12,8 +13,19 @@ use super::report;
 /// Ingest and print the summary.
 pub fn run(c: &IngestConfig, ctx: &Ctx) -> Result<()> {
     let specs = input_specs(&c.inputs)?;
-    let st = scanflow::pipeline::ingest::ingest(&specs, &c.output, &c.params, ctx)?;
-    report::ingest(&st, &c.output);
+    let Some((shard, work)) = &c.split else {
+        let st = scanflow::pipeline::ingest::ingest(&specs, &c.output, &c.params, ctx)?;
+        report::ingest(&st, &c.output);
+        return Ok(());
+    };
+    let work = scanflow::pipeline::workdir::resolve(work, &c.output)?;
+    match ingest_split(&specs, &c.output, &c.params, *shard, &work, ctx)? {
+        SplitOutcome::Committed(st) => report::ingest(&st, &c.output),
+        SplitOutcome::Done => println!(
+            "shard {shard}: {} is complete (written by another task)",
+            c.output.display()
+        ),
+    }
     Ok(())
 }
 

@@ -45,6 +45,7 @@ pub mod iges;
 pub mod islands;
 pub mod las;
 pub mod las_meta;
+pub mod le;
 pub mod mesh_read;
 pub mod mesh_write;
 pub mod mmap;

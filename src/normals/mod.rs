@@ -49,6 +49,9 @@ use crate::error::{Error, IoContext, Result};
 use crate::exec::Ctx;
 use crate::exec::budget::Share;
 use crate::exec::cache::Lru;
+use crate::exec::progress::Stage;
+use crate::io::atomic::{self, Durability};
+use crate::io::le::{LeReader, LeWriter};
 use crate::store::Staged;
 use crate::store::manifest::{CellEntry, EstimatedNormals, next_wave};
 use crate::types::{Aabb, Viewpoint};
@@ -117,13 +120,85 @@ impl Default for NormalParams {
     }
 }
 
-/// What pass 1 keeps of a cell.
-struct CellResult {
+/// What pass 1 keeps of a cell: its components' orientation data, the pairs reaching into
+/// other cells, the `k` it fitted with and its counts.
+#[derive(Debug, Clone)]
+pub struct CellResult {
     nodes: Vec<Node>,
     cross: Vec<Cross>,
     k: usize,
     by_view: u64,
     degenerate: u64,
+}
+
+/// The first bytes of a file of pass-1 results.
+const RESULTS_MAGIC: &[u8; 8] = b"SFNORM01";
+
+/// Pass-1 results of consecutive cells as bytes ([`LeWriter`]), for the checkpoints of a
+/// split ingest.
+pub fn encode_results(results: &[CellResult]) -> Vec<u8> {
+    let mut w = LeWriter::new(RESULTS_MAGIC);
+    w.u64(results.len() as u64);
+    for r in results {
+        w.u64(r.k as u64);
+        w.u64(r.by_view);
+        w.u64(r.degenerate);
+        w.u64(r.nodes.len() as u64);
+        for n in &r.nodes {
+            w.f64(n.vote);
+            for &(e, c) in &n.ext {
+                w.f64(e);
+                w.f32(c);
+            }
+        }
+        w.u64(r.cross.len() as u64);
+        for x in &r.cross {
+            w.u32(x.comp);
+            x.n.iter().for_each(|&v| w.f32(v));
+            w.u32(x.to_cell);
+            w.u32(x.to_idx);
+        }
+    }
+    w.finish()
+}
+
+/// Read what [`encode_results`] wrote to `path` (named in errors).
+pub fn decode_results(bytes: &[u8], path: &Path) -> Result<Vec<CellResult>> {
+    let bad = || Error::input(path, "damaged normals checkpoint");
+    let mut r = LeReader::open(bytes, RESULTS_MAGIC).ok_or_else(bad)?;
+    let decoded = (|| {
+        let mut out = Vec::new();
+        for _ in 0..r.u64()? {
+            let (k, by_view, degenerate) = (r.u64()? as usize, r.u64()?, r.u64()?);
+            let mut nodes = Vec::new();
+            for _ in 0..r.u64()? {
+                let mut n = Node::EMPTY;
+                n.vote = r.f64()?;
+                for e in &mut n.ext {
+                    *e = (r.f64()?, r.f32()?);
+                }
+                nodes.push(n);
+            }
+            let mut cross = Vec::new();
+            for _ in 0..r.u64()? {
+                cross.push(Cross {
+                    comp: r.u32()?,
+                    n: [r.f32()?, r.f32()?, r.f32()?],
+                    to_cell: r.u32()?,
+                    to_idx: r.u32()?,
+                });
+            }
+            out.push(CellResult {
+                nodes,
+                cross,
+                k,
+                by_view,
+                degenerate,
+            });
+        }
+        r.at_end().then_some(out)
+    })();
+    decoded.ok_or_else(bad)
 }
 
 /// A cell's positions and scan ids, decoded.
@@ -197,19 +272,36 @@ pub fn estimate_cells(
     ctx: &Ctx,
 ) -> Result<(EstimatedNormals, f64)> {
     let t0 = Instant::now();
-    if params.k < 3 {
-        return Err(Error::Usage(format!(
-            "--neighbours {}: a plane fit needs at least 3",
-            params.k
-        )));
-    }
+    check_k(params)?;
     let side_dir = store.dir().join(SIDE_DIR);
     std::fs::create_dir_all(&side_dir).with_path(&side_dir)?;
     let total: u64 = store.cells().iter().map(|c| c.count).sum();
-    let results = fit_cells(store, &side_dir, params, ctx)?;
+    let stage = ctx.progress.stage("normals", Some(total), "points");
+    let results = fit_cells(
+        store,
+        &side_dir,
+        params,
+        0..store.cells().len(),
+        &stage,
+        ctx,
+    )?;
+    stage.finish(None);
     let signs = component_signs(&results, store.cells(), &side_dir, ctx)?;
     rewrite_cells(store, &side_dir, &signs, ctx)?;
     std::fs::remove_dir(&side_dir).with_path(&side_dir)?;
+    Ok((
+        summary(&results, &signs, params, total),
+        t0.elapsed().as_secs_f64(),
+    ))
+}
+
+/// What the estimation did, from every cell's pass-1 results and pass 2's signs.
+pub fn summary(
+    results: &[CellResult],
+    signs: &Signs,
+    params: &NormalParams,
+    total: u64,
+) -> EstimatedNormals {
     let by_view: u64 = results.iter().map(|r| r.by_view).sum();
     let degenerate: u64 = results.iter().map(|r| r.degenerate).sum();
     if degenerate > 0 {
@@ -218,28 +310,29 @@ pub fn estimate_cells(
             params.k
         );
     }
-    Ok((
-        EstimatedNormals {
-            k: params.k,
-            k_max: results.iter().map(|r| r.k).max().unwrap_or(params.k),
-            robust: params.robust,
-            by_viewpoint: by_view,
-            by_propagation: total - by_view - degenerate,
-            degenerate,
-            components: signs.trees as u64,
-        },
-        t0.elapsed().as_secs_f64(),
-    ))
+    EstimatedNormals {
+        k: params.k,
+        k_max: results.iter().map(|r| r.k).max().unwrap_or(params.k),
+        robust: params.robust,
+        by_viewpoint: by_view,
+        by_propagation: total - by_view - degenerate,
+        degenerate,
+        components: signs.trees as u64,
+    }
 }
 
-/// Pass 1: fit and orient every cell locally, wave by wave; each cell's normals and
-/// components go to a side file.
-fn fit_cells(
+/// Pass 1 for the cells `range`: fit and orient each cell locally, wave by wave; each cell's
+/// normals and components go to its side file in `side_dir` (written under a temporary name
+/// and renamed: tasks of a split ingest may write the same one).
+pub fn fit_cells(
     store: &Staged,
     side_dir: &Path,
     params: &NormalParams,
+    range: std::ops::Range<usize>,
+    stage: &Stage,
     ctx: &Ctx,
 ) -> Result<Vec<CellResult>> {
+    check_k(params)?;
     let cells = store.cells();
     let cell_boxes: Vec<Aabb> = cells.iter().map(|c| store.cube().cell_box(c.key)).collect();
     let viewpoints = store.viewpoints();
@@ -255,14 +348,12 @@ fn fit_cells(
         store,
         lru: Lru::new(cache_cap),
     };
-    let total: u64 = cells.iter().map(|c| c.count).sum();
-    let stage = ctx.progress.stage("normals", Some(total), "points");
     let share = ctx.budget.share(Share::NormalsWave);
-    let mut results: Vec<CellResult> = Vec::with_capacity(cells.len());
-    let mut i = 0;
-    while i < cells.len() {
+    let mut results: Vec<CellResult> = Vec::with_capacity(range.len());
+    let mut i = range.start;
+    while i < range.end {
         let (j, bytes) = next_wave(
-            cells,
+            &cells[..range.end],
             i,
             CELLS_PER_THREAD * ctx.threads(),
             share,
@@ -277,7 +368,7 @@ fn fit_cells(
         let firsts: Vec<OwnFit> = ctx.pool.install(|| {
             ids.par_iter()
                 .zip(&own)
-                .map(|(&c, pts)| estimate::fit_own(&pts.pos, &cell_boxes[c], params, &stage))
+                .map(|(&c, pts)| estimate::fit_own(&pts.pos, &cell_boxes[c], params, stage))
                 .collect()
         });
         // b) halos.
@@ -304,8 +395,18 @@ fn fit_cells(
         }
         i = j;
     }
-    stage.finish(None);
     Ok(results)
+}
+
+/// A plane fit needs three points.
+fn check_k(params: &NormalParams) -> Result<()> {
+    if params.k < 3 {
+        return Err(Error::Usage(format!(
+            "--neighbours {}: a plane fit needs at least 3",
+            params.k
+        )));
+    }
+    Ok(())
 }
 
 /// The points of other cells within `f.h` of cell `c`'s box `bx`.
@@ -384,7 +485,7 @@ fn finish_cell(
 }
 
 /// The outcome of pass 2.
-struct Signs {
+pub struct Signs {
     /// Per node (component of a cell): flip its normals.
     flip: Vec<bool>,
     /// Index of each cell's first node; one more entry at the end.
@@ -393,8 +494,45 @@ struct Signs {
     trees: usize,
 }
 
+/// The first bytes of a file of pass-2 signs.
+const SIGNS_MAGIC: &[u8; 8] = b"SFSIGN01";
+
+impl Signs {
+    /// As bytes ([`LeWriter`]), for the checkpoint a split ingest's tasks share.
+    pub fn encode(&self) -> Vec<u8> {
+        let mut w = LeWriter::new(SIGNS_MAGIC);
+        w.u64(self.trees as u64);
+        w.u64(self.offsets.len() as u64);
+        self.offsets.iter().for_each(|&o| w.u32(o));
+        w.u64(self.flip.len() as u64);
+        self.flip.iter().for_each(|&f| w.u32(f as u32));
+        w.finish()
+    }
+
+    /// Read what [`Signs::encode`] wrote to `path` (named in errors).
+    pub fn decode(bytes: &[u8], path: &Path) -> Result<Signs> {
+        let bad = || Error::input(path, "damaged normals checkpoint");
+        let mut r = LeReader::open(bytes, SIGNS_MAGIC).ok_or_else(bad)?;
+        let s = (|| {
+            let trees = r.u64()? as usize;
+            let offsets = (0..r.u64()?)
+                .map(|_| r.u32())
+                .collect::<Option<Vec<u32>>>()?;
+            let flip = (0..r.u64()?)
+                .map(|_| r.u32().map(|f| f != 0))
+                .collect::<Option<Vec<bool>>>()?;
+            r.at_end().then_some(Signs {
+                flip,
+                offsets,
+                trees,
+            })
+        })();
+        s.ok_or_else(bad)
+    }
+}
+
 /// Pass 2: sum the cross-cell pairs into edges between components and orient the components.
-fn component_signs(
+pub fn component_signs(
     results: &[CellResult],
     cells: &[CellEntry],
     side_dir: &Path,
@@ -470,7 +608,11 @@ fn rewrite_cells(store: &mut Staged, side_dir: &Path, signs: &Signs, ctx: &Ctx) 
             (i..j)
                 .into_par_iter()
                 .map(|c| {
-                    let r = rewrite_cell(st, c, side_dir, signs);
+                    let r = rewrite_cell(st, c, side_dir, signs, &st.cell_path(c)).and_then(|r| {
+                        let side = side_path(side_dir, c);
+                        std::fs::remove_file(&side).with_path(&side)?;
+                        Ok(r)
+                    });
                     stage.inc(1);
                     r
                 })
@@ -486,8 +628,15 @@ fn rewrite_cells(store: &mut Staged, side_dir: &Path, signs: &Signs, ctx: &Ctx) 
     Ok(())
 }
 
-/// Rewrite cell `c` with its oriented normals and remove its side file.
-fn rewrite_cell(store: &Staged, c: usize, side_dir: &Path, signs: &Signs) -> Result<(u64, u32)> {
+/// Pass 3 for cell `c`: write it to `dest` with its oriented normals; returns the file's size
+/// and CRC-32.
+pub fn rewrite_cell(
+    store: &Staged,
+    c: usize,
+    side_dir: &Path,
+    signs: &Signs,
+    dest: &Path,
+) -> Result<(u64, u32)> {
     let mut b = store.read_cell(c)?;
     let side = side_path(side_dir, c);
     let (normals, comp) = read_side(&side, store.cells()[c].count as usize)?;
@@ -503,12 +652,11 @@ fn rewrite_cell(store: &Staged, c: usize, side_dir: &Path, signs: &Signs) -> Res
             }
         })
         .collect();
-    let r = store.rewrite_with_normals(c, &b)?;
-    std::fs::remove_file(&side).with_path(&side)?;
-    Ok(r)
+    store.write_with_normals(dest, &b)
 }
 
-fn side_path(dir: &Path, i: usize) -> PathBuf {
+/// The side file of cell `i` in `dir`.
+pub fn side_path(dir: &Path, i: usize) -> PathBuf {
     dir.join(format!("{i}.nrm"))
 }
 
@@ -522,7 +670,7 @@ fn write_side(path: &Path, normals: &[[f32; 3]], comp: &[u32]) -> Result<()> {
         }
         raw.extend_from_slice(&c.to_le_bytes());
     }
-    std::fs::write(path, raw).with_path(path)
+    atomic::write(path, &raw, Durability::Renamed)
 }
 
 fn read_side(path: &Path, count: usize) -> Result<(Vec<[f32; 3]>, Vec<u32>)> {

@@ -20,6 +20,7 @@ pub mod fit_tiles;
 mod global;
 pub mod hexmesh;
 pub mod ingest;
+pub mod ingest_split;
 pub mod merge;
 mod points;
 pub mod reconstruct;

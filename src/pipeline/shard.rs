@@ -29,11 +29,13 @@
 //! relies on advisory locks (often off on cluster mounts), on clocks agreeing between hosts
 //! or on a claim's owner being alive: the second pass makes claims a hint, never a lock.
 //!
-//! **Stages.** Ingest runs once before the shards (one task); the shards' reconstruction
-//! leaves every tile's mesh checkpointed and the description `merge` reads; `merge` welds the
-//! tiles in Morton order into the same bytes one process writes. The job script chains the
-//! three with dependencies (`sbatch --dependency=afterok`); a run on one machine is the one
-//! shard `0/1` whose tiles go straight to the welder instead of through their checkpoints.
+//! **Stages.** Ingest is split the same way, into its own array of tasks
+//! ([`crate::pipeline::ingest_split`]: count, scatter, assembly and normals items, the store
+//! written by whichever task finds the last item done); the shards' reconstruction leaves
+//! every tile's mesh checkpointed and the description `merge` reads; `merge` welds the tiles
+//! in Morton order into the same bytes one process writes. The job script chains the three
+//! with dependencies (`sbatch --dependency=afterok`); a run on one machine is the one shard
+//! `0/1` whose tiles go straight to the welder instead of through their checkpoints.
 
 use std::io::Write;
 use std::ops::Range;

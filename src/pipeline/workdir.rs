@@ -32,6 +32,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use super::ingest::{StoreSource, WORK_STORE};
+use super::ingest_split::INGEST_DIR;
 use super::merge::MERGE_FILE;
 use super::reconstruct::ReconParams;
 use crate::error::{Error, IoContext, Result};
@@ -402,7 +403,7 @@ pub fn remove_owned(dir: &Path) -> Result<Vec<PathBuf>> {
         return Ok(Vec::new());
     }
     atomic::remove_stale_temps(dir, true);
-    for name in [WORK_STORE, LEAVES, TILES, CLAIMS, PATCHES] {
+    for name in [WORK_STORE, LEAVES, TILES, CLAIMS, PATCHES, INGEST_DIR] {
         let p = dir.join(name);
         if p.is_dir() {
             std::fs::remove_dir_all(&p).with_path(&p)?;

@@ -165,6 +165,22 @@ impl Inputs {
         Ok(st.skipped_invalid)
     }
 
+    /// Each input's largest colour channel seen so far by the count pass.
+    pub fn max_colors(&self) -> Vec<u16> {
+        self.max_color
+            .iter()
+            .map(|m| m.load(Ordering::Relaxed))
+            .collect()
+    }
+
+    /// Raise each input's largest colour channel to at least `m`'s (what other processes'
+    /// counts saw, for a store built by shards).
+    pub fn raise_max_colors(&self, m: &[u16]) {
+        for (a, &b) in self.max_color.iter().zip(m) {
+            a.fetch_max(b, Ordering::Relaxed);
+        }
+    }
+
     /// After the count pass: scale the colours of every LAS input whose channels all fit in
     /// 0..=255 from then on.
     pub fn settle_colour_scale(&self) {

@@ -41,6 +41,7 @@
 //! ([`Share::ScatterBuffers`]) are each admitted by the budget before they are allocated;
 //! chunk size and buffer capacity are derived from it.
 
+pub mod assemble;
 pub mod bounds;
 pub mod cell_file;
 pub mod count;
@@ -58,14 +59,16 @@ use std::time::Instant;
 use crate::error::{Error, IoContext, Result};
 use crate::exec::Ctx;
 use crate::exec::budget::Share;
-use crate::io::InputSpec;
+use crate::exec::progress::Stage;
 use crate::io::atomic;
+use crate::io::{ChunkSpec, InputSpec};
 use crate::types::{Aabb, CellKey, Cube, PointBatch, Viewpoint};
 use cell_file::RecordLayout;
+pub use count::Partial;
 use input::Inputs;
 use manifest::{CellEntry, EstimatedNormals, MANIFEST, Manifest, STORE_FORMAT, STORE_VERSION};
 use octree::Hierarchy;
-use scatter::{CellOut, Scatter};
+use scatter::{CellOut, PackIndex, Scatter};
 use split::Splitter;
 
 pub use info::{FileInfo, LasInfo, file_info};
@@ -193,11 +196,19 @@ pub struct Sizes {
 impl Sizes {
     /// The sizes for `params` under `ctx`'s budget and threads.
     pub fn new(params: &StoreParams, ctx: &Ctx) -> Sizes {
-        let wave = CHUNKS_PER_THREAD * ctx.threads();
-        let chunk_points = params.chunk_points.unwrap_or_else(|| {
-            (ctx.budget.share(Share::IngestChunks) / (wave as u64 * CHUNK_BYTES_PER_POINT))
-                .clamp(MIN_CHUNK_POINTS, MAX_CHUNK_POINTS)
-        });
+        let mut wave = CHUNKS_PER_THREAD * ctx.threads();
+        let share = ctx.budget.share(Share::IngestChunks);
+        let chunk_points = match params.chunk_points {
+            // Chunks of a given size: as many in flight as the slice holds, two at least.
+            Some(n) => {
+                wave = wave
+                    .min((share / (n * CHUNK_BYTES_PER_POINT).max(1)) as usize)
+                    .max(2);
+                n
+            }
+            None => (share / (wave as u64 * CHUNK_BYTES_PER_POINT))
+                .clamp(MIN_CHUNK_POINTS, MAX_CHUNK_POINTS),
+        };
         Sizes {
             wave,
             chunk_points,
@@ -207,21 +218,31 @@ impl Sizes {
     }
 }
 
-/// The temporary directory a store is built in (`.NAME.tmp-<pid>`), removed unless committed.
-struct TempDir(atomic::TempDir);
+/// The directory a store is built in: a temporary one next to the destination
+/// (`.NAME.tmp-<pid>`, removed unless committed), or a split ingest's, shared by its tasks in
+/// their work directory (left for the work directory's removal).
+pub enum StageDir {
+    /// One process's.
+    Temp(atomic::TempDir),
+    /// The shards'.
+    Shared(PathBuf),
+}
 
-impl TempDir {
+impl StageDir {
     /// A fresh temporary directory next to `out`, with its `cells/` directory.
-    fn create(out: &Path) -> Result<TempDir> {
+    fn create(out: &Path) -> Result<StageDir> {
         let tmp = atomic::TempDir::create(out)
             .map_err(|e| Error::input(out, format!("cannot create the store: {e}")))?;
         let cells = tmp.path().join(CELLS_DIR);
         std::fs::create_dir(&cells).with_path(&cells)?;
-        Ok(TempDir(tmp))
+        Ok(StageDir::Temp(tmp))
     }
 
     fn path(&self) -> &Path {
-        self.0.path()
+        match self {
+            StageDir::Temp(t) => t.path(),
+            StageDir::Shared(p) => p,
+        }
     }
 
     /// Rename the directory to `out`, unless something appeared there meanwhile.
@@ -232,123 +253,284 @@ impl TempDir {
                 "output store appeared while ingesting; not replaced",
             ));
         }
-        self.0.commit(out)
+        match self {
+            StageDir::Temp(t) => t.commit(out),
+            StageDir::Shared(p) => {
+                std::fs::rename(&p, out).with_path(out)?;
+                atomic::sync_parent_dir(out);
+                Ok(())
+            }
+        }
     }
+}
+
+/// An ingest's inputs opened, its sizes chosen from the budget and the provisional bounds read
+/// (pass 1): where one process's ingest ([`stage`]) and every task of a split one start.
+pub struct Prepared {
+    /// The opened inputs.
+    pub inputs: Inputs,
+    /// Chunk and wave sizes.
+    pub sizes: Sizes,
+    /// The options.
+    pub params: StoreParams,
+    /// The provisional bounds the first count's cube is laid around.
+    pub provisional: Aabb,
+    /// Levels of the counting grid.
+    pub levels: u32,
+    /// Bytes the cell buffers of a scatter hold before they are flushed.
+    pub cap: usize,
+    t0: Instant,
+}
+
+impl Prepared {
+    /// Open `inputs` and read the provisional bounds (pass 1).
+    pub fn open(inputs: &[InputSpec], params: &StoreParams, ctx: &Ctx) -> Result<Prepared> {
+        Prepared::open_chunked(inputs, params, |_| params.chunk_points, ctx)
+    }
+
+    /// [`Prepared::open`], the points per chunk chosen by `chunk_points` from the inputs'
+    /// point count (`None`: from the budget).
+    pub fn open_chunked(
+        inputs: &[InputSpec],
+        params: &StoreParams,
+        chunk_points: impl Fn(u64) -> Option<u64>,
+        ctx: &Ctx,
+    ) -> Result<Prepared> {
+        let t0 = Instant::now();
+        if params.max_cell_points == 0 {
+            return Err(Error::Usage("--max-cell-points must be at least 1".into()));
+        }
+        let inputs = Inputs::open(inputs, params)?;
+        let params = StoreParams {
+            chunk_points: chunk_points(inputs.total),
+            ..params.clone()
+        };
+        let sizes = Sizes::new(&params, ctx);
+        // The sample is cut in windows of a fixed size, not in the budget-sized chunks, so that
+        // the cube (and every byte after it) is the same for any --threads and --mem.
+        let windows = inputs.chunks(bounds::SAMPLE_WINDOW_POINTS)?;
+        let window_bytes = bounds::SAMPLE_WINDOW_POINTS * CHUNK_BYTES_PER_POINT;
+        let provisional = bounds::provisional(&inputs, &windows, window_bytes, ctx)?;
+        let levels = octree::count_levels(inputs.total, params.max_cell_points, sizes.max_levels);
+        Ok(Prepared {
+            inputs,
+            sizes,
+            params,
+            provisional,
+            levels,
+            cap: ctx.budget.share(Share::ScatterBuffers) as usize,
+            t0,
+        })
+    }
+
+    /// Flush the cell buffers at `cap` bytes at most (a split ingest's tasks, whose budgets
+    /// may differ a little, all flush alike: the cells' frames follow the flushes).
+    pub fn limit_buffers(&mut self, cap: usize) {
+        self.cap = self.cap.min(cap);
+    }
+
+    /// The inputs cut in chunks of [`Sizes::chunk_points`].
+    pub fn chunks(&self) -> Result<Vec<(usize, ChunkSpec)>> {
+        self.inputs.chunks(self.sizes.chunk_points)
+    }
+
+    /// Bytes the budget admits for one counting grid ([`count::grid_bytes`]).
+    pub fn grid_bytes(&self) -> u64 {
+        count::grid_bytes(1u64 << (3 * self.levels))
+    }
+
+    /// Count `chunks` on the grid over `cube` (a part of pass 2).
+    pub fn count(
+        &self,
+        chunks: &[(usize, ChunkSpec)],
+        cube: &Cube,
+        stage: &Stage,
+        ctx: &Ctx,
+    ) -> Result<count::Partial> {
+        count::count_chunks(
+            &self.inputs,
+            chunks,
+            self.sizes.chunk_bytes,
+            cube,
+            self.levels,
+            stage,
+            ctx,
+        )
+    }
+
+    /// The hierarchy of cells cut from the summed counts of the grid.
+    pub fn hierarchy(&self, counts: &[u64]) -> Hierarchy {
+        Hierarchy::build(
+            CellKey::ROOT,
+            self.levels,
+            counts,
+            self.params.max_cell_points,
+        )
+    }
+
+    /// Scatter `chunks` into the leaves of `hier` over `cube`, all of their frames into the
+    /// one file `pack`, its index appended (a part of pass 3, for a split ingest).
+    pub fn scatter_pack(
+        &self,
+        chunks: &[(usize, ChunkSpec)],
+        cube: &Cube,
+        hier: &Hierarchy,
+        pack: &Path,
+        stage: &Stage,
+        ctx: &Ctx,
+    ) -> Result<PackIndex> {
+        let _permit = ctx
+            .budget
+            .acquire(2 * self.cap as u64, "the cell buffers")?;
+        let keys: Vec<CellKey> = hier.leaves.iter().map(|l| l.key).collect();
+        let sc = Scatter::packed(
+            pack,
+            &keys,
+            self.inputs.layout,
+            self.cap,
+            self.params.zstd_level,
+        )?;
+        let out = scatter::scatter_pass(self, chunks, cube, hier, sc, stage, ctx)?;
+        let idx = out
+            .pack
+            .ok_or_else(|| Error::Internal("a packed scatter returned no index".into()))?;
+        idx.append_to(pack)?;
+        Ok(idx)
+    }
+
+    /// The split pass (pass 4) over cube `cube`, writing into `dir`.
+    pub fn splitter<'a>(&'a self, cube: &'a Cube, dir: &'a Path) -> Splitter<'a> {
+        Splitter {
+            cube,
+            layout: self.inputs.layout,
+            max_cell_points: self.params.max_cell_points,
+            zstd_level: self.params.zstd_level,
+            sizes: &self.sizes,
+            dir,
+            cap: self.cap,
+        }
+    }
+
+    /// The store whose cells `cells` lie in `dir`'s `cells/`, ready for normals and the commit.
+    pub fn staged(self, dir: StageDir, out: &Path, cells: Vec<CellEntry>, found: Found) -> Staged {
+        Staged {
+            tmp: dir,
+            raw: None,
+            out: out.to_path_buf(),
+            input_bytes: self.inputs.input_bytes(),
+            chunk_points: self.sizes.chunk_points,
+            max_cell_points: self.params.max_cell_points,
+            zstd_level: self.params.zstd_level,
+            levels: self.levels,
+            inputs: self.inputs,
+            cells,
+            found,
+            t0: self.t0,
+        }
+    }
+}
+
+/// What the count and split passes found about the whole store.
+#[derive(Debug, Clone, Copy)]
+pub struct Found {
+    /// The root cube.
+    pub cube: Cube,
+    /// The exact bounds of the points.
+    pub bounds: Aabb,
+    /// Points skipped as invalid.
+    pub skipped: u64,
+    /// Cells still over the limit.
+    pub oversized_cells: usize,
 }
 
 /// Run the four passes: ingest `inputs` into a store staged next to `out`, not yet committed.
 pub fn stage(inputs: &[InputSpec], out: &Path, params: &StoreParams, ctx: &Ctx) -> Result<Staged> {
-    let t0 = Instant::now();
-    if params.max_cell_points == 0 {
-        return Err(Error::Usage("--max-cell-points must be at least 1".into()));
-    }
     if out.exists() {
         return Err(Error::input(
             out,
             "output store already exists; remove it or choose another -o",
         ));
     }
-    let inputs = Inputs::open(inputs, params)?;
-    let tmp = TempDir::create(out)?;
+    let prep = Prepared::open(inputs, params, ctx)?;
+    let tmp = StageDir::create(out)?;
     let cells_dir = tmp.path().join(CELLS_DIR);
-    let sizes = Sizes::new(params, ctx);
-    let chunks = inputs.chunks(sizes.chunk_points)?;
-    let input_bytes = inputs.input_bytes();
-
-    // Pass 1: bounds.
-    // The sample is cut in windows of a fixed size, not in the budget-sized chunks, so that
-    // the cube (and every byte after it) is the same for any --threads and --mem.
-    let windows = inputs.chunks(bounds::SAMPLE_WINDOW_POINTS)?;
-    let window_bytes = bounds::SAMPLE_WINDOW_POINTS * CHUNK_BYTES_PER_POINT;
-    let provisional = bounds::provisional(&inputs, &windows, window_bytes, ctx)?;
+    let chunks = prep.chunks()?;
 
     // Pass 2: count (and exact bounds), cut into the hierarchy.
-    let levels = octree::count_levels(inputs.total, params.max_cell_points, sizes.max_levels);
-    let grid_permit = ctx
-        .budget
-        .acquire(count::grid_bytes(1u64 << (3 * levels)), "the counting grid")?;
+    let grid_permit = ctx.budget.acquire(prep.grid_bytes(), "the counting grid")?;
     let counted = count::count_pass(
-        &inputs,
+        &prep.inputs,
         &chunks,
-        sizes.chunk_bytes,
-        &provisional,
-        levels,
+        prep.sizes.chunk_bytes,
+        &prep.provisional,
+        prep.levels,
         ctx,
     )?;
-    inputs.settle_colour_scale();
-    if counted.bounds.is_empty() {
-        return Err(Error::input(
-            &inputs.specs[0].path,
-            "no valid points: every point has a non-finite coordinate or an invalid normal",
-        ));
-    }
+    prep.inputs.settle_colour_scale();
+    no_valid_points(&prep.inputs, &counted.bounds)?;
     let count::Counted {
         cube,
         counts,
         bounds,
         skipped,
     } = counted;
-    let hier = Hierarchy::build(CellKey::ROOT, levels, &counts, params.max_cell_points);
+    let hier = prep.hierarchy(&counts);
     drop(counts);
     drop(grid_permit);
 
     // Pass 3: scatter.
-    let cap = ctx.budget.share(Share::ScatterBuffers) as usize;
-    let scatter_permit = ctx.budget.acquire(2 * cap as u64, "the cell buffers")?;
+    let scatter_permit = ctx
+        .budget
+        .acquire(2 * prep.cap as u64, "the cell buffers")?;
     let keys: Vec<CellKey> = hier.leaves.iter().map(|l| l.key).collect();
-    let sc = Scatter::new(&cells_dir, &keys, inputs.layout, cap, params.zstd_level)?;
-    let cells_out = scatter::scatter_pass(&inputs, &chunks, &sizes, &cube, &hier, sc, ctx)?;
+    let sc = Scatter::new(
+        &cells_dir,
+        &keys,
+        prep.inputs.layout,
+        prep.cap,
+        params.zstd_level,
+    )?;
+    let stage = ctx
+        .progress
+        .stage("scatter", Some(prep.inputs.total), "points");
+    let cells_out = scatter::scatter_pass(&prep, &chunks, &cube, &hier, sc, &stage, ctx)?.cells;
+    stage.finish(None);
 
     // Pass 4: split cells still over the limit.
-    let splitter = Splitter {
-        cube: &cube,
-        layout: inputs.layout,
-        max_cell_points: params.max_cell_points,
-        zstd_level: params.zstd_level,
-        sizes: &sizes,
-        dir: &cells_dir,
-    };
-    let (cells_out, oversized_cells) = splitter.run(cells_out, &hier, ctx)?;
+    let oversized: Vec<bool> = hier.leaves.iter().map(|l| l.oversized).collect();
+    let (cells_out, oversized_cells) = prep
+        .splitter(&cube, &cells_dir)
+        .run(cells_out, &oversized, ctx)?;
     drop(scatter_permit);
 
     let cells = cell_entries(&cells_out)?;
-    Ok(Staged {
-        tmp,
-        out: out.to_path_buf(),
-        inputs,
-        cells,
+    let found = Found {
         cube,
         bounds,
-        levels,
         skipped,
         oversized_cells,
-        input_bytes,
-        chunk_points: sizes.chunk_points,
-        max_cell_points: params.max_cell_points,
-        zstd_level: params.zstd_level,
-        t0,
-    })
+    };
+    Ok(prep.staged(tmp, out, cells, found))
+}
+
+/// The error when the count found no valid point.
+pub fn no_valid_points(inputs: &Inputs, bounds: &Aabb) -> Result<()> {
+    if bounds.is_empty() {
+        return Err(Error::input(
+            &inputs.specs[0].path,
+            "no valid points: every point has a non-finite coordinate or an invalid normal",
+        ));
+    }
+    Ok(())
 }
 
 /// The manifest entries of the non-empty cells, in key order; the files of empty cells are
 /// removed.
-fn cell_entries(cells_out: &[CellOut]) -> Result<Vec<CellEntry>> {
+pub fn cell_entries(cells_out: &[CellOut]) -> Result<Vec<CellEntry>> {
     let mut cells: Vec<CellEntry> = cells_out
         .iter()
         .filter(|c| c.count > 0)
-        .map(|c| {
-            let (level, coords) = c.key.decode();
-            CellEntry {
-                key: c.key,
-                level,
-                coords,
-                count: c.count,
-                bounds: c.bounds,
-                file: format!("{}.zst", c.key.file_name()),
-                bytes: c.bytes,
-                crc32: c.crc32(),
-            }
-        })
+        .map(cell_entry)
         .collect();
     for c in cells_out.iter().filter(|c| c.count == 0) {
         std::fs::remove_file(&c.file).with_path(&c.file)?;
@@ -357,18 +539,31 @@ fn cell_entries(cells_out: &[CellOut]) -> Result<Vec<CellEntry>> {
     Ok(cells)
 }
 
+/// The manifest entry of a written cell.
+pub fn cell_entry(c: &CellOut) -> CellEntry {
+    let (level, coords) = c.key.decode();
+    CellEntry {
+        key: c.key,
+        level,
+        coords,
+        count: c.count,
+        bounds: c.bounds,
+        file: format!("{}.zst", c.key.file_name()),
+        bytes: c.bytes,
+        crc32: c.crc32(),
+    }
+}
+
 /// A store whose cells are written in its temporary directory, not yet committed: nothing
 /// appears under its name until [`Staged::commit`], and dropping it removes the directory.
 pub struct Staged {
-    tmp: TempDir,
+    tmp: StageDir,
+    raw: Option<PathBuf>,
     out: PathBuf,
     inputs: Inputs,
     cells: Vec<CellEntry>,
-    cube: Cube,
-    bounds: Aabb,
+    found: Found,
     levels: u32,
-    skipped: u64,
-    oversized_cells: usize,
     input_bytes: u64,
     chunk_points: u64,
     max_cell_points: u64,
@@ -389,7 +584,7 @@ impl Staged {
 
     /// The root cube.
     pub fn cube(&self) -> &Cube {
-        &self.cube
+        &self.found.cube
     }
 
     /// Layout of the records as written by the passes.
@@ -415,14 +610,26 @@ impl Staged {
     /// Read every point of cell `i` as written by the passes, checking count and checksum.
     pub fn read_cell(&self, i: usize) -> Result<PointBatch> {
         let e = &self.cells[i];
-        cell_file::read_cell_file(&self.cell_path(i), self.layout(), e.count, e.crc32)
+        let path = match &self.raw {
+            Some(d) => d.join(&e.file),
+            None => self.cell_path(i),
+        };
+        cell_file::read_cell_file(&path, self.layout(), e.count, e.crc32)
     }
 
-    /// Rewrite cell `i` from `b`, its points in the same order with their normals, in the
-    /// layout with normals; returns the file's size and CRC-32 for [`Staged::set_cell_file`].
-    pub fn rewrite_with_normals(&self, i: usize, b: &PointBatch) -> Result<(u64, u32)> {
+    /// Read the cells as written by the passes from the directory `dir` instead of the
+    /// store's `cells/` (a split ingest, whose tasks write the cells with their normals into
+    /// the store while others may still read the cells without).
+    pub fn read_cells_from(&mut self, dir: PathBuf) {
+        self.raw = Some(dir);
+    }
+
+    /// Write the points of `b` with their normals, in the layout with normals, to `path` (a
+    /// cell's file, or a split ingest's checkpoint of it); returns the file's size and CRC-32
+    /// for [`Staged::set_cell_file`].
+    pub fn write_with_normals(&self, path: &Path, b: &PointBatch) -> Result<(u64, u32)> {
         let layout = self.layout().with_normals();
-        cell_file::write_cell_file(&self.cell_path(i), layout, b, self.zstd_level)
+        cell_file::write_cell_file(path, layout, b, self.zstd_level)
     }
 
     /// Record the size and CRC-32 of cell `i`'s rewritten file.
@@ -448,7 +655,7 @@ impl Staged {
             self.layout()
         };
         let points: u64 = self.cells.iter().map(|c| c.count).sum();
-        let (skipped, total) = (self.skipped, self.inputs.total);
+        let (skipped, total) = (self.found.skipped, self.inputs.total);
         if points + skipped != total {
             return Err(Error::Internal(format!(
                 "ingest stored {points} points and skipped {skipped}, but the inputs hold {total}"
@@ -466,8 +673,8 @@ impl Staged {
             record_fields: manifest::record_fields(layout.attrs, layout.pos_f32),
             position_f32: layout.pos_f32,
             compression: "zstd".into(),
-            bounds: self.bounds,
-            cube: self.cube,
+            bounds: self.found.bounds,
+            cube: self.found.cube,
             max_cell_points: self.max_cell_points,
             count_levels: self.levels,
             inputs: self.inputs.entries(),
@@ -480,7 +687,7 @@ impl Staged {
             points,
             skipped_invalid: skipped,
             cells,
-            oversized_cells: self.oversized_cells,
+            oversized_cells: self.found.oversized_cells,
             input_bytes: self.input_bytes,
             store_bytes,
             secs: self.t0.elapsed().as_secs_f64(),

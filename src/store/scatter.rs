@@ -14,10 +14,11 @@ use rayon::prelude::*;
 
 use crate::error::{Error, IoContext, Result};
 use crate::exec::Ctx;
+use crate::exec::progress::Stage;
 use crate::io::ChunkSpec;
-use crate::store::Sizes;
+use crate::io::le::{LeReader, LeWriter};
+use crate::store::Prepared;
 use crate::store::cell_file::RecordLayout;
-use crate::store::input::Inputs;
 use crate::store::octree::{GridMap, Hierarchy};
 use crate::types::{Aabb, CellKey, Cube, PointBatch};
 
@@ -33,15 +34,15 @@ const WRITE_BUFFER_BYTES: usize = 1 << 20;
 /// chunk order (that copy, serial, left a core idle a third of the time when the two
 /// alternated).
 pub fn scatter_pass(
-    inputs: &Inputs,
+    prep: &Prepared,
     chunks: &[(usize, ChunkSpec)],
-    sizes: &Sizes,
     cube: &Cube,
     hier: &Hierarchy,
     mut sc: Scatter,
+    stage: &Stage,
     ctx: &Ctx,
-) -> Result<Vec<CellOut>> {
-    let stage = ctx.progress.stage("scatter", Some(inputs.total), "points");
+) -> Result<Scattered> {
+    let (inputs, sizes) = (&prep.inputs, &prep.sizes);
     // Decoded chunks and their groups live in slots reused from half to half: fresh buffers
     // per chunk cost a page fault per 4 KiB, a quarter of the pass's time. The slots are
     // admitted once, for the whole pass.
@@ -90,9 +91,7 @@ pub fn scatter_pass(
         std::mem::swap(&mut loading, &mut loaded);
         ready = next.map_or(0, |p| p.len());
     }
-    let cells_out = sc.finish(&ctx.pool)?;
-    stage.finish(None);
-    Ok(cells_out)
+    sc.finish(&ctx.pool)
 }
 
 /// One chunk's buffers: its points, their leaves and their records grouped by leaf.
@@ -216,6 +215,25 @@ pub struct CellOut {
 }
 
 impl CellOut {
+    /// An empty cell `key` written to `file`.
+    pub fn new(key: CellKey, file: PathBuf) -> CellOut {
+        CellOut {
+            key,
+            file,
+            count: 0,
+            bounds: Aabb::EMPTY,
+            bytes: 0,
+            crc: crc32fast::Hasher::new(),
+            buf: Vec::new(),
+        }
+    }
+
+    /// Add the compressed bytes `z`, appended to its file.
+    pub fn wrote(&mut self, z: &[u8]) {
+        self.crc.update(z);
+        self.bytes += z.len() as u64;
+    }
+
     /// CRC-32 of the file as written so far.
     pub fn crc32(&self) -> u32 {
         self.crc.clone().finalize()
@@ -230,6 +248,151 @@ pub struct Scatter {
     cap: usize,
     zstd_level: i32,
     writer: FrameWriter,
+    pack: Option<Pack>,
+}
+
+/// Where a packed scatter's frames went: one file, frames appended in the order flushed.
+#[derive(Debug, Default)]
+struct Pack {
+    path: PathBuf,
+    bytes: u64,
+    /// `(cell, offset, length)` of every frame, in file order.
+    frames: Vec<(u32, u64, u32)>,
+}
+
+/// What a scatter wrote: its cells, and for a packed scatter where each cell's frames lie in
+/// the pack ([`PackIndex`]).
+pub struct Scattered {
+    /// The cells, in the order of the keys given.
+    pub cells: Vec<CellOut>,
+    /// The pack's index (a packed scatter only).
+    pub pack: Option<PackIndex>,
+}
+
+/// One cell's part of a pack: its points' count and bounds and its frames, in order.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PackCell {
+    /// The cell's index among the scatter's keys.
+    pub cell: u32,
+    /// Records.
+    pub count: u64,
+    /// Bounds of its points.
+    pub bounds: Aabb,
+    /// `(offset, length)` of each of its frames in the pack.
+    pub frames: Vec<(u64, u32)>,
+}
+
+/// The index of a pack: every non-empty cell's part, by cell. Stored at the pack's end,
+/// followed by its length (`u64`), its CRC-32 (`u32`) and [`PACK_MAGIC`], little-endian.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct PackIndex {
+    /// The cells with points, in cell order.
+    pub cells: Vec<PackCell>,
+}
+
+/// The last bytes of a pack.
+pub const PACK_MAGIC: &[u8; 8] = b"SFPACK01";
+
+impl PackIndex {
+    /// The index as bytes (see [`PackIndex`]).
+    fn encode(&self) -> Vec<u8> {
+        let mut w = LeWriter::default();
+        w.u64(self.cells.len() as u64);
+        for c in &self.cells {
+            w.u32(c.cell);
+            w.u64(c.count);
+            c.bounds
+                .min
+                .iter()
+                .chain(&c.bounds.max)
+                .for_each(|&v| w.f64(v));
+            w.u64(c.frames.len() as u64);
+            for &(o, l) in &c.frames {
+                w.u64(o);
+                w.u32(l);
+            }
+        }
+        w.bytes
+    }
+
+    /// Append the index and its trailer to the pack `path` and sync it.
+    pub fn append_to(&self, path: &Path) -> Result<()> {
+        let idx = self.encode();
+        let mut f = std::fs::OpenOptions::new()
+            .append(true)
+            .open(path)
+            .with_path(path)?;
+        f.write_all(&idx).with_path(path)?;
+        f.write_all(&(idx.len() as u64).to_le_bytes())
+            .with_path(path)?;
+        f.write_all(&crc32fast::hash(&idx).to_le_bytes())
+            .with_path(path)?;
+        f.write_all(PACK_MAGIC).with_path(path)?;
+        f.sync_all().with_path(path)
+    }
+
+    /// Read the index at the end of the pack `path`, checking its trailer, its checksum and
+    /// that every frame lies in the data before it.
+    pub fn read(path: &Path) -> Result<PackIndex> {
+        use std::io::{Read, Seek, SeekFrom};
+        let bad = |why: &str| Error::input(path, format!("damaged ingest pack: {why}"));
+        let mut f = std::fs::File::open(path).with_path(path)?;
+        let len = f.metadata().with_path(path)?.len();
+        if len < 20 {
+            return Err(bad("shorter than its trailer"));
+        }
+        let mut tail = [0u8; 20];
+        f.seek(SeekFrom::Start(len - 20)).with_path(path)?;
+        f.read_exact(&mut tail).with_path(path)?;
+        if &tail[12..] != PACK_MAGIC {
+            return Err(bad("no trailer"));
+        }
+        let n = u64::from_le_bytes(tail[..8].try_into().unwrap_or_default());
+        let crc = u32::from_le_bytes(tail[8..12].try_into().unwrap_or_default());
+        let data_end = len
+            .checked_sub(20 + n)
+            .ok_or_else(|| bad("index longer than the file"))?;
+        let mut idx = vec![0u8; n as usize];
+        f.seek(SeekFrom::Start(data_end)).with_path(path)?;
+        f.read_exact(&mut idx).with_path(path)?;
+        if crc32fast::hash(&idx) != crc {
+            return Err(bad("index checksum mismatch"));
+        }
+        let mut r = LeReader::raw(&idx);
+        let mut cells = Vec::new();
+        let ncells = r.u64().ok_or_else(|| bad("truncated index"))?;
+        for _ in 0..ncells {
+            let c = (|| {
+                let (cell, count) = (r.u32()?, r.u64()?);
+                let mut v = [0f64; 6];
+                for x in &mut v {
+                    *x = r.f64()?;
+                }
+                let mut frames = Vec::new();
+                for _ in 0..r.u64()? {
+                    frames.push((r.u64()?, r.u32()?));
+                }
+                Some(PackCell {
+                    cell,
+                    count,
+                    bounds: Aabb {
+                        min: [v[0], v[1], v[2]],
+                        max: [v[3], v[4], v[5]],
+                    },
+                    frames,
+                })
+            })()
+            .ok_or_else(|| bad("truncated index"))?;
+            if c.frames.iter().any(|&(o, l)| o + l as u64 > data_end) {
+                return Err(bad("a frame lies beyond the data"));
+            }
+            cells.push(c);
+        }
+        if !r.at_end() {
+            return Err(bad("bytes after the index"));
+        }
+        Ok(PackIndex { cells })
+    }
 }
 
 /// Frames queued for the writer thread at most; a slow disk then slows the scatter down
@@ -319,15 +482,7 @@ impl Scatter {
             let file = dir.join(format!("{}.zst", key.file_name()));
             // Create (truncate) now, so that a cell's file exists even before its first frame.
             std::fs::File::create(&file).with_path(&file)?;
-            cells.push(CellOut {
-                key,
-                file,
-                count: 0,
-                bounds: Aabb::EMPTY,
-                bytes: 0,
-                crc: crc32fast::Hasher::new(),
-                buf: Vec::new(),
-            });
+            cells.push(CellOut::new(key, file));
         }
         Ok(Scatter {
             layout,
@@ -336,6 +491,36 @@ impl Scatter {
             cap: cap_bytes.max(FRAME_BYTES),
             zstd_level,
             writer: FrameWriter::start()?,
+            pack: None,
+        })
+    }
+
+    /// Cells `keys` whose frames all go to the one file `pack` (created, or truncated), in
+    /// the order they are flushed; [`Scatter::finish`] then returns the pack's index, which
+    /// the caller appends ([`PackIndex::append_to`]). A shard's scatter of some of the
+    /// inputs' chunks, whose cells are assembled later from every shard's pack.
+    pub fn packed(
+        pack: &Path,
+        keys: &[CellKey],
+        layout: RecordLayout,
+        cap_bytes: usize,
+        zstd_level: i32,
+    ) -> Result<Scatter> {
+        std::fs::File::create(pack).with_path(pack)?;
+        Ok(Scatter {
+            layout,
+            cells: keys
+                .iter()
+                .map(|&k| CellOut::new(k, pack.to_path_buf()))
+                .collect(),
+            buffered: 0,
+            cap: cap_bytes.max(FRAME_BYTES),
+            zstd_level,
+            writer: FrameWriter::start()?,
+            pack: Some(Pack {
+                path: pack.to_path_buf(),
+                ..Default::default()
+            }),
         })
     }
 
@@ -391,9 +576,17 @@ impl Scatter {
         for (i, z) in frames {
             let z = z.map_err(|e| Error::Internal(format!("zstd compression failed: {e}")))?;
             let c = &mut self.cells[i];
-            c.crc.update(&z);
-            c.bytes += z.len() as u64;
-            if self.writer.send(i, &c.file, z).is_err() {
+            c.wrote(&z);
+            let sent = match &mut self.pack {
+                Some(p) => {
+                    p.frames.push((i as u32, p.bytes, z.len() as u32));
+                    p.bytes += z.len() as u64;
+                    // One open file for every frame.
+                    self.writer.send(usize::MAX, &p.path, z)
+                }
+                None => self.writer.send(i, &c.file, z),
+            };
+            if sent.is_err() {
                 // The writer stopped on an error; finish() reports it.
                 break;
             }
@@ -401,11 +594,36 @@ impl Scatter {
         Ok(())
     }
 
-    /// Flush everything and return the cells.
-    pub fn finish(mut self, pool: &rayon::ThreadPool) -> Result<Vec<CellOut>> {
+    /// Flush everything and return the cells (and a pack's index).
+    pub fn finish(mut self, pool: &rayon::ThreadPool) -> Result<Scattered> {
         self.flush(pool, 0)?;
         self.writer.finish()?;
-        Ok(self.cells)
+        let pack = self.pack.take().map(|p| {
+            let mut cells: Vec<PackCell> = self
+                .cells
+                .iter()
+                .enumerate()
+                .filter(|(_, c)| c.count > 0)
+                .map(|(i, c)| PackCell {
+                    cell: i as u32,
+                    count: c.count,
+                    bounds: c.bounds,
+                    frames: Vec::new(),
+                })
+                .collect();
+            let mut at = vec![u32::MAX; self.cells.len()];
+            for (k, c) in cells.iter().enumerate() {
+                at[c.cell as usize] = k as u32;
+            }
+            for (i, o, l) in p.frames {
+                cells[at[i as usize] as usize].frames.push((o, l));
+            }
+            PackIndex { cells }
+        });
+        Ok(Scattered {
+            cells: self.cells,
+            pack,
+        })
     }
 }
 
@@ -413,6 +631,71 @@ impl Scatter {
 mod tests {
     use super::*;
     use crate::types::Attributes;
+
+    #[test]
+    fn a_pack_holds_each_cells_frames_in_order_and_damage_is_refused() {
+        let d = tempfile::tempdir().unwrap();
+        let pack = d.path().join("0.pack");
+        let layout = RecordLayout::new(Attributes::default(), false);
+        let keys: Vec<CellKey> = (0..3).map(|i| CellKey::ROOT.child(i)).collect();
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(2)
+            .build()
+            .unwrap();
+        // A tiny cap: every push flushes, so cells get several frames, interleaved.
+        let mut sc = Scatter::packed(&pack, &keys, layout, 0, 1).unwrap();
+        sc.cap = 24;
+        let mut want: Vec<Vec<f64>> = vec![Vec::new(); 3];
+        for chunk in 0..4 {
+            let b = PointBatch {
+                pos: (0..6).map(|i| [(chunk * 6 + i) as f64, 0.0, 0.0]).collect(),
+                ..Default::default()
+            };
+            let leaf = [2, 0, 2, 0, 0, 2];
+            for (i, &l) in leaf.iter().enumerate() {
+                want[l as usize].push(b.pos[i][0]);
+            }
+            let mut g = Grouped::default();
+            group(&b, &leaf, 3, &layout, &mut g);
+            sc.push(&pool, &g).unwrap();
+        }
+        let idx = sc.finish(&pool).unwrap().pack.unwrap();
+        idx.append_to(&pack).unwrap();
+        let back = PackIndex::read(&pack).unwrap();
+        assert_eq!(back, idx);
+        assert_eq!(
+            back.cells.iter().map(|c| c.cell).collect::<Vec<_>>(),
+            [0, 2]
+        );
+        let bytes = std::fs::read(&pack).unwrap();
+        for c in &back.cells {
+            assert!(c.frames.len() > 1, "cell {} in one frame", c.cell);
+            let mut got = PointBatch::default();
+            for &(o, l) in &c.frames {
+                let raw =
+                    zstd::bulk::decompress(&bytes[o as usize..(o + l as u64) as usize], 1 << 20)
+                        .unwrap();
+                let mut part = PointBatch::default();
+                layout.decode(&raw, &mut part);
+                got.pos.extend(part.pos);
+            }
+            let xs: Vec<f64> = got.pos.iter().map(|p| p[0]).collect();
+            assert_eq!(xs, want[c.cell as usize]);
+            assert_eq!(c.count as usize, xs.len());
+        }
+        // Truncated, or a byte of the index changed: refused, naming the pack.
+        for damage in [bytes.len() - 1, bytes.len() - 30] {
+            let mut b = bytes.clone();
+            if damage == bytes.len() - 1 {
+                b.truncate(damage);
+            } else {
+                b[damage] ^= 1;
+            }
+            std::fs::write(&pack, &b).unwrap();
+            let e = PackIndex::read(&pack).unwrap_err().to_string();
+            assert!(e.contains("0.pack") && e.contains("damaged"), "{e}");
+        }
+    }
 
     #[test]
     fn groups_keep_input_order() {

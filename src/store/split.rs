@@ -9,7 +9,6 @@ use rayon::prelude::*;
 
 use crate::error::{Error, IoContext, Result};
 use crate::exec::Ctx;
-use crate::exec::budget::Share;
 use crate::store::cell_file::{CellReader, RecordLayout};
 use crate::store::count::grid_bytes;
 use crate::store::octree::{GridMap, Hierarchy, count_levels};
@@ -31,24 +30,23 @@ pub struct Splitter<'a> {
     pub sizes: &'a Sizes,
     /// The directory of the cell files.
     pub dir: &'a Path,
+    /// Bytes the cell buffers hold before they are flushed ([`Scatter::new`]).
+    pub cap: usize,
 }
 
 impl Splitter<'_> {
-    /// Split every oversized leaf of `hier` (whose cells `cells` are, in leaf order) until
-    /// each cell holds at most the limit or lies at the finest level. Returns the cells, the
-    /// split ones replaced by their sub-cells (appended), and how many stay over the limit.
+    /// Split every cell of `cells` that `oversized` marks (the leaves of the hierarchy over
+    /// the limit) until each holds at most the limit or lies at the finest level. Returns the
+    /// cells, the split ones replaced by their sub-cells (appended), and how many stay over
+    /// the limit.
     pub fn run(
         &self,
         mut cells: Vec<CellOut>,
-        hier: &Hierarchy,
+        oversized: &[bool],
         ctx: &Ctx,
     ) -> Result<(Vec<CellOut>, usize)> {
-        let mut oversized: Vec<usize> = hier
-            .leaves
-            .iter()
-            .enumerate()
-            .filter(|(_, l)| l.oversized)
-            .map(|(i, _)| i)
+        let mut oversized: Vec<usize> = (0..cells.len())
+            .filter(|&i| oversized.get(i).copied().unwrap_or(false))
             .collect();
         if oversized.is_empty() {
             return Ok((cells, 0));
@@ -103,9 +101,8 @@ impl Splitter<'_> {
         let counts = self.count_cell(cell, r, grid)?;
         let h = Hierarchy::build(cell.key, r, &counts, self.max_cell_points);
         drop(counts);
-        let cap = ctx.budget.share(Share::ScatterBuffers) as usize;
         let keys: Vec<CellKey> = h.leaves.iter().map(|l| l.key).collect();
-        let mut sc = Scatter::new(self.dir, &keys, self.layout, cap, self.zstd_level)?;
+        let mut sc = Scatter::new(self.dir, &keys, self.layout, self.cap, self.zstd_level)?;
         let mut rd = CellReader::open(&cell.file, self.layout)?;
         let n = self.sizes.chunk_points as usize;
         let mut buf = Vec::new();
@@ -142,7 +139,7 @@ impl Splitter<'_> {
                 cell.file.display()
             )));
         }
-        let cells = sc.finish(&ctx.pool)?;
+        let cells = sc.finish(&ctx.pool)?.cells;
         Ok(cells
             .into_iter()
             .zip(&h.leaves)

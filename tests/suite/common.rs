@@ -8,6 +8,24 @@ pub fn bin() -> Command {
     Command::new(env!("CARGO_BIN_EXE_scanflow"))
 }
 
+/// Start scanflow with `args`, its output captured (a task running beside others).
+pub fn spawn(args: &[&str]) -> std::process::Child {
+    bin()
+        .args(args)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("the scanflow binary runs")
+}
+
+/// Wait for a process [`spawn`] started; require success; return its standard output.
+pub fn finish(c: std::process::Child) -> String {
+    let o = c.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "a task failed: {err}");
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
 /// Run scanflow with `args`; return the output.
 pub fn run(args: &[&str]) -> Output {
     bin().args(args).output().expect("the scanflow binary runs")

@@ -12,6 +12,7 @@ mod formats;
 mod hex;
 mod iges;
 mod ingest;
+mod ingest_shards;
 mod input_kinds;
 mod normals;
 mod ownership;

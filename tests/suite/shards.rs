@@ -3,10 +3,10 @@
 //! merges; and a real SLURM array job (scripts/slurm/ci_test.sh).
 
 use std::path::{Path, PathBuf};
-use std::process::{Child, Stdio};
+use std::process::Child;
 use std::time::{Duration, Instant};
 
-use super::common::{bin, fails, ok, shared, usage};
+use super::common::{bin, fails, finish, ok, shared, spawn, usage};
 
 /// A store of a synthetic torus of `points` points.
 fn torus_store(dir: &Path, points: u32) -> PathBuf {
@@ -60,20 +60,7 @@ fn spawn_shard(store: &Path, out: &Path, work: &Path, i: u32, n: u32, opts: &[&s
     let mut args = recon(store, out, opts);
     args.extend(["--threads", "1", "--shard", &shard]);
     args.extend(["--work-dir", work.to_str().unwrap()]);
-    bin()
-        .args(&args)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("the scanflow binary runs")
-}
-
-/// Wait for a shard; require success; return its summary line.
-fn finish(c: Child) -> String {
-    let o = c.wait_with_output().unwrap();
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert!(o.status.success(), "a shard failed: {err}");
-    String::from_utf8_lossy(&o.stdout).into_owned()
+    spawn(&args)
 }
 
 /// The arguments of merging the work directory `work` into `out`.
