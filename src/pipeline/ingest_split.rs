@@ -45,8 +45,9 @@ use crate::store::count::{first_cube, recount_cube};
 use crate::store::manifest::{CellEntry, MANIFEST, Manifest};
 use crate::store::{CELLS_DIR, Found, Partial, Prepared, StageDir, Staged, cell_entry};
 
-/// Most points per input chunk of a split ingest (11 MiB in flight a chunk).
-pub const SPLIT_CHUNK_POINTS: u64 = 1 << 16;
+/// Most points per input chunk of a split ingest (45 MiB in flight a chunk): one process's
+/// largest chunk.
+pub const SPLIT_CHUNK_POINTS: u64 = crate::store::MAX_CHUNK_POINTS;
 
 /// Fewest points per input chunk of a split ingest.
 pub const MIN_SPLIT_CHUNK_POINTS: u64 = 2048;
@@ -66,14 +67,17 @@ pub fn split_chunk_points(total: u64) -> u64 {
 /// budget's slice reaches from a --mem of 256 MiB up.
 pub const SPLIT_BUFFER_BYTES: usize = 32 << 20;
 
-/// Chunks per count and scatter item: up to 1 Mi points, about a second of a core's work.
+/// Chunks per count and scatter item: up to 4 Mi points, a few seconds of a core's work,
+/// so that an item's own costs (a counting grid, fresh buffers, every cell's last frame)
+/// stay small beside it.
 pub const CHUNKS_PER_ITEM: usize = 16;
 
 /// Leaves of the hierarchy per assembly item.
 pub const LEAVES_PER_ITEM: usize = 8;
 
-/// Cells per normals item.
-pub const CELLS_PER_ITEM: usize = 8;
+/// Cells per normals item: one, a cell being up to `--max-cell-points` points of fits (a
+/// task works on as many at once as it has threads).
+pub const CELLS_PER_ITEM: usize = 1;
 
 /// The split ingest's directory inside the work directory.
 pub const INGEST_DIR: &str = "ingest";
@@ -254,6 +258,44 @@ fn items(
     Ok(())
 }
 
+/// [`items`] done by as many workers of the pool as it has threads at once, each taking the
+/// next item of this task's order: for items that use one core each (a cell's normals).
+fn items_concurrent(
+    shard: Shard,
+    n: usize,
+    dirs: &Dirs,
+    prefix: &str,
+    done: impl Fn(usize) -> bool + Sync,
+    work: impl Fn(usize) -> Result<()> + Sync,
+    ctx: &Ctx,
+) -> Result<()> {
+    use rayon::prelude::*;
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    let order = shard.order(n);
+    for &claiming in shard.passes() {
+        let next = AtomicUsize::new(0);
+        let worker = || -> Result<()> {
+            loop {
+                let Some(&i) = order.get(next.fetch_add(1, Ordering::Relaxed)) else {
+                    return Ok(());
+                };
+                if done(i) || (claiming && !dirs.claims.take(&format!("{prefix}{i}"))?) {
+                    continue;
+                }
+                work(i)?;
+            }
+        };
+        let ended: Vec<Result<()>> = ctx.pool.install(|| {
+            (0..ctx.threads().min(n.max(1)))
+                .into_par_iter()
+                .map(|_| worker())
+                .collect()
+        });
+        ended.into_iter().collect::<Result<()>>()?;
+    }
+    Ok(())
+}
+
 /// Item `i`'s range of `n` things, `per` an item.
 fn range(i: usize, per: usize, n: usize) -> Range<usize> {
     i * per..((i + 1) * per).min(n)
@@ -378,7 +420,7 @@ fn build(prep: Prepared, out: &Path, shard: Shard, dirs: &Dirs, ctx: &Ctx) -> Re
             let tmp = atomic::temp_name(&dirs.sub(&format!("a{i}")));
             std::fs::create_dir(&tmp).with_path(&tmp)?;
             let done = (|| {
-                let cells = assemble::assemble(p, &hier, r.clone(), &tmp)?;
+                let cells = assemble::assemble(p, &hier, r.clone(), &tmp, &ctx.pool)?;
                 let over: Vec<bool> = r.clone().map(|l| hier.leaves[l].oversized).collect();
                 let (cells, oversized) = prep.splitter(&cube, &tmp).run(cells, &over, ctx)?;
                 let mut entries = Vec::new();
@@ -445,23 +487,18 @@ fn finish(
     let sides = dirs.sub("sides");
     let fit = |i: usize| dirs.sub("fits").join(format!("{i}.bin"));
     let stage = ctx.progress.stage("normals", Some(total), "points");
-    items(
+    let st: &Staged = &staged;
+    items_concurrent(
         shard,
         k,
         dirs,
         "n-",
         |i| fit(i).exists(),
         |i| {
-            let r = normals::fit_cells(
-                &staged,
-                &sides,
-                np,
-                range(i, CELLS_PER_ITEM, n),
-                &stage,
-                ctx,
-            )?;
+            let r = normals::fit_cells(st, &sides, np, range(i, CELLS_PER_ITEM, n), &stage, ctx)?;
             atomic::write(&fit(i), &normals::encode_results(&r), Durability::Renamed)
         },
+        ctx,
     )?;
     stage.finish(None);
     let mut results: Vec<CellResult> = Vec::with_capacity(n);
@@ -480,7 +517,8 @@ fn finish(
     };
     let orient = |i: usize| dirs.sub("orient").join(format!("{i}.json"));
     let stage = ctx.progress.stage("orient", Some(n as u64), "cells");
-    items(
+    let st: &Staged = &staged;
+    items_concurrent(
         shard,
         k,
         dirs,
@@ -489,8 +527,8 @@ fn finish(
         |i| {
             let mut done = Vec::new();
             for c in range(i, CELLS_PER_ITEM, n) {
-                let dest = staged.cell_path(c);
-                let (bytes, crc) = normals::rewrite_cell(&staged, c, &sides, &signs, &dest)?;
+                let dest = st.cell_path(c);
+                let (bytes, crc) = normals::rewrite_cell(st, c, &sides, &signs, &dest)?;
                 done.push((c, bytes, crc));
                 stage.inc(1);
             }
@@ -498,6 +536,7 @@ fn finish(
                 .map_err(|e| Error::Internal(format!("oriented cells: {e}")))?;
             atomic::write(&orient(i), &text, Durability::Renamed)
         },
+        ctx,
     )?;
     stage.finish(None);
     for i in 0..k {

@@ -15,6 +15,8 @@ use std::ops::Range;
 use std::os::unix::fs::FileExt;
 use std::path::{Path, PathBuf};
 
+use rayon::prelude::*;
+
 use crate::error::{Error, IoContext, Result};
 use crate::store::octree::Hierarchy;
 use crate::store::scatter::{CellOut, PackIndex};
@@ -49,54 +51,63 @@ impl Pack {
 }
 
 /// The cells of the leaves `leaves` of `hier`, each written to `dir` from its frames in every
-/// pack, in the packs' order; returns them in leaf order (empty ones too, with no file).
+/// pack, in the packs' order, the leaves in parallel on `pool`; returns them in leaf order
+/// (empty ones too, with no file).
 pub fn assemble(
     packs: &[Pack],
     hier: &Hierarchy,
     leaves: Range<usize>,
     dir: &Path,
+    pool: &rayon::ThreadPool,
 ) -> Result<Vec<CellOut>> {
-    let mut out = Vec::with_capacity(leaves.len());
-    let mut buf = Vec::new();
-    for leaf in leaves {
-        let key = hier.leaves[leaf].key;
-        let path = dir.join(format!("{}.zst", key.file_name()));
-        let mut cell = CellOut::new(key, path.clone());
-        let parts: Vec<(&Pack, usize)> = packs
-            .iter()
-            .filter_map(|p| {
-                p.index
-                    .cells
-                    .binary_search_by_key(&(leaf as u32), |c| c.cell)
-                    .ok()
-                    .map(|k| (p, k))
-            })
-            .collect();
-        if !parts.is_empty() {
-            let mut w =
-                std::io::BufWriter::with_capacity(1 << 20, File::create(&path).with_path(&path)?);
-            for (p, k) in parts {
-                let c = &p.index.cells[k];
-                for &(off, len) in &c.frames {
-                    buf.resize(len as usize, 0);
-                    p.file.read_exact_at(&mut buf, off).with_path(&p.path)?;
-                    cell.wrote(&buf);
-                    w.write_all(&buf).with_path(&path)?;
-                }
-                cell.count += c.count;
-                cell.bounds = cell.bounds.union(&c.bounds);
+    let cells: Vec<Result<CellOut>> = pool.install(|| {
+        leaves
+            .into_par_iter()
+            .map(|leaf| assemble_leaf(packs, hier, leaf, dir))
+            .collect()
+    });
+    cells.into_iter().collect()
+}
+
+/// The cell of leaf `leaf`, written to `dir`.
+fn assemble_leaf(packs: &[Pack], hier: &Hierarchy, leaf: usize, dir: &Path) -> Result<CellOut> {
+    let key = hier.leaves[leaf].key;
+    let path = dir.join(format!("{}.zst", key.file_name()));
+    let mut cell = CellOut::new(key, path.clone());
+    let parts: Vec<(&Pack, usize)> = packs
+        .iter()
+        .filter_map(|p| {
+            p.index
+                .cells
+                .binary_search_by_key(&(leaf as u32), |c| c.cell)
+                .ok()
+                .map(|k| (p, k))
+        })
+        .collect();
+    if !parts.is_empty() {
+        let file = File::create(&path).with_path(&path)?;
+        let mut w = std::io::BufWriter::with_capacity(1 << 20, file);
+        let mut buf = Vec::new();
+        for (p, k) in parts {
+            let c = &p.index.cells[k];
+            for &(off, len) in &c.frames {
+                buf.resize(len as usize, 0);
+                p.file.read_exact_at(&mut buf, off).with_path(&p.path)?;
+                cell.wrote(&buf);
+                w.write_all(&buf).with_path(&path)?;
             }
-            w.flush().with_path(&path)?;
+            cell.count += c.count;
+            cell.bounds = cell.bounds.union(&c.bounds);
         }
-        if cell.count != hier.leaves[leaf].count {
-            return Err(Error::Internal(format!(
-                "cell {}: the packs hold {} points, the count found {}; an input changed while ingesting?",
-                key.file_name(),
-                cell.count,
-                hier.leaves[leaf].count
-            )));
-        }
-        out.push(cell);
+        w.flush().with_path(&path)?;
     }
-    Ok(out)
+    if cell.count != hier.leaves[leaf].count {
+        return Err(Error::Internal(format!(
+            "cell {}: the packs hold {} points, the count found {}; an input changed while ingesting?",
+            key.file_name(),
+            cell.count,
+            hier.leaves[leaf].count
+        )));
+    }
+    Ok(cell)
 }
