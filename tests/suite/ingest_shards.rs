@@ -8,7 +8,7 @@ use std::time::{Duration, Instant};
 
 use scanflow::store::Store;
 
-use super::common::{bin, fails, finish, ok, spawn, usage};
+use super::common::{bin, fails, finish, ok, shared, spawn, usage};
 
 /// Write `points` samples of the synthetic `shape` to `dir/NAME.ply`.
 fn synth(dir: &Path, shape: &str, points: u32, seed: u32) -> PathBuf {
@@ -86,9 +86,18 @@ fn split_ingests_store_the_points_of_one_process() {
     ];
     let bumpy = vec![synth(d.path(), "bumpy", 60_000, 3)];
     let estimate = ["--normals", "estimate", "--max-cell-points", "4000"];
-    for (k, (inputs, opts)) in [(&oriented, &[][..]), (&bumpy, &estimate[..])]
-        .into_iter()
-        .enumerate()
+    // A LiDAR tile: 8-bit colours in 16-bit fields (scaled by what every task's count saw),
+    // normals estimated facing the sky.
+    let lidar: Vec<PathBuf> = shared("lidar/autzen_trim.las").into_iter().collect();
+    let small = ["--max-cell-points", "20000"];
+    for (k, (inputs, opts)) in [
+        (&oriented, &[][..]),
+        (&bumpy, &estimate[..]),
+        (&lidar, &small[..]),
+    ]
+    .into_iter()
+    .enumerate()
+    .filter(|(_, (i, _))| !i.is_empty())
     {
         let single = d.path().join(format!("single-{k}"));
         ok(&ingest_args(inputs, &single, opts));
