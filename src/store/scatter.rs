@@ -234,6 +234,14 @@ impl CellOut {
         self.bytes += z.len() as u64;
     }
 
+    /// Add `len` compressed bytes appended to its file, of CRC-32 `crc32` (taken when they
+    /// were compressed).
+    pub fn copied(&mut self, len: u64, crc32: u32) {
+        self.crc
+            .combine(&crc32fast::Hasher::new_with_initial_len(crc32, len));
+        self.bytes += len;
+    }
+
     /// CRC-32 of the file as written so far.
     pub fn crc32(&self) -> u32 {
         self.crc.clone().finalize()
@@ -256,8 +264,8 @@ pub struct Scatter {
 struct Pack {
     path: PathBuf,
     bytes: u64,
-    /// `(cell, offset, length)` of every frame, in file order.
-    frames: Vec<(u32, u64, u32)>,
+    /// `(cell, frame)` of every frame, in file order.
+    frames: Vec<(u32, Frame)>,
 }
 
 /// What a scatter wrote: its cells, and for a packed scatter where each cell's frames lie in
@@ -278,8 +286,20 @@ pub struct PackCell {
     pub count: u64,
     /// Bounds of its points.
     pub bounds: Aabb,
-    /// `(offset, length)` of each of its frames in the pack.
-    pub frames: Vec<(u64, u32)>,
+    /// Its frames in the pack, in order.
+    pub frames: Vec<Frame>,
+}
+
+/// Where one compressed frame lies in a pack, and its CRC-32 (a cell's CRC-32 is combined
+/// from its frames' without reading them again).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Frame {
+    /// Its first byte in the pack.
+    pub offset: u64,
+    /// Its length in bytes.
+    pub len: u32,
+    /// CRC-32 of its bytes.
+    pub crc32: u32,
 }
 
 /// The index of a pack: every non-empty cell's part, by cell. Stored at the pack's end,
@@ -307,9 +327,10 @@ impl PackIndex {
                 .chain(&c.bounds.max)
                 .for_each(|&v| w.f64(v));
             w.u64(c.frames.len() as u64);
-            for &(o, l) in &c.frames {
-                w.u64(o);
-                w.u32(l);
+            for f in &c.frames {
+                w.u64(f.offset);
+                w.u32(f.len);
+                w.u32(f.crc32);
             }
         }
         w.bytes
@@ -370,7 +391,11 @@ impl PackIndex {
                 }
                 let mut frames = Vec::new();
                 for _ in 0..r.u64()? {
-                    frames.push((r.u64()?, r.u32()?));
+                    frames.push(Frame {
+                        offset: r.u64()?,
+                        len: r.u32()?,
+                        crc32: r.u32()?,
+                    });
                 }
                 Some(PackCell {
                     cell,
@@ -383,7 +408,7 @@ impl PackIndex {
                 })
             })()
             .ok_or_else(|| bad("truncated index"))?;
-            if c.frames.iter().any(|&(o, l)| o + l as u64 > data_end) {
+            if c.frames.iter().any(|f| f.offset + f.len as u64 > data_end) {
                 return Err(bad("a frame lies beyond the data"));
             }
             cells.push(c);
@@ -579,7 +604,12 @@ impl Scatter {
             c.wrote(&z);
             let sent = match &mut self.pack {
                 Some(p) => {
-                    p.frames.push((i as u32, p.bytes, z.len() as u32));
+                    let frame = Frame {
+                        offset: p.bytes,
+                        len: z.len() as u32,
+                        crc32: crc32fast::hash(&z),
+                    };
+                    p.frames.push((i as u32, frame));
                     p.bytes += z.len() as u64;
                     // One open file for every frame.
                     self.writer.send(usize::MAX, &p.path, z)
@@ -615,8 +645,8 @@ impl Scatter {
             for (k, c) in cells.iter().enumerate() {
                 at[c.cell as usize] = k as u32;
             }
-            for (i, o, l) in p.frames {
-                cells[at[i as usize] as usize].frames.push((o, l));
+            for (i, f) in p.frames {
+                cells[at[i as usize] as usize].frames.push(f);
             }
             PackIndex { cells }
         });
@@ -671,10 +701,10 @@ mod tests {
         for c in &back.cells {
             assert!(c.frames.len() > 1, "cell {} in one frame", c.cell);
             let mut got = PointBatch::default();
-            for &(o, l) in &c.frames {
-                let raw =
-                    zstd::bulk::decompress(&bytes[o as usize..(o + l as u64) as usize], 1 << 20)
-                        .unwrap();
+            for f in &c.frames {
+                let z = &bytes[f.offset as usize..(f.offset + f.len as u64) as usize];
+                assert_eq!(crc32fast::hash(z), f.crc32);
+                let raw = zstd::bulk::decompress(z, 1 << 20).unwrap();
                 let mut part = PointBatch::default();
                 layout.decode(&raw, &mut part);
                 got.pos.extend(part.pos);
