@@ -185,6 +185,29 @@ fn two_million_points_under_256m() {
     assert!(peak > 0, "no peak RSS reported: {err}");
     // The README states the margin: 64 MiB over --mem.
     assert!(peak < (256 + 64) << 20, "peak RSS {} MiB", peak >> 20);
+    // A split ingest's task, under a quarter of that budget.
+    let split = d.path().join("split.store");
+    let o = run(&[
+        "ingest",
+        s(&ply),
+        "-o",
+        s(&split),
+        "--shard",
+        "0/1",
+        "--mem",
+        "64M",
+        "--progress",
+        "json",
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert_eq!(Store::open(&split).unwrap().manifest.point_count, 2_000_000);
+    let peak = peak_rss(&err);
+    assert!(
+        peak > 0 && peak < (64 + 64) << 20,
+        "peak RSS {} MiB",
+        peak >> 20
+    );
 }
 
 #[test]
