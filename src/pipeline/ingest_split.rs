@@ -339,12 +339,15 @@ fn build(prep: Prepared, out: &Path, shard: Shard, dirs: &Dirs, ctx: &Ctx) -> Re
             let bytes = std::fs::read(path(i)).with_path(path(i))?;
             total.add(&Partial::decode(&bytes, &path(i))?);
         }
-        match recount_cube(&prep.provisional, &total.bounds) {
-            Some(c) if round == 0 => {
+        match (round == 0)
+            .then(|| recount_cube(&prep.provisional, &total.bounds))
+            .flatten()
+        {
+            Some(c) => {
                 cube = c;
                 round = 1;
             }
-            _ => break,
+            None => break,
         }
     }
     crate::store::no_valid_points(&prep.inputs, &total.bounds)?;

@@ -86,6 +86,18 @@ fn split_ingests_store_the_points_of_one_process() {
     ];
     let bumpy = vec![synth(d.path(), "bumpy", 60_000, 3)];
     let estimate = ["--normals", "estimate", "--max-cell-points", "4000"];
+    // A far point the bounds' sample misses (in the second of 244 windows, the sample reading
+    // one in three): the count is repeated on the exact cube, by every task alike.
+    let outlier = vec![synth(d.path(), "sphere", 1_000_000, 7)];
+    let mut bytes = std::fs::read(&outlier[0]).unwrap();
+    let data = bytes
+        .windows(11)
+        .position(|w| w == b"end_header\n")
+        .unwrap()
+        + 11;
+    let at = data + (4096 + 5) * 24;
+    bytes[at..at + 4].copy_from_slice(&100f32.to_le_bytes());
+    std::fs::write(&outlier[0], &bytes).unwrap();
     // A LiDAR tile: 8-bit colours in 16-bit fields (scaled by what every task's count saw),
     // normals estimated facing the sky.
     let lidar: Vec<PathBuf> = shared("lidar/autzen_trim.las").into_iter().collect();
@@ -94,13 +106,18 @@ fn split_ingests_store_the_points_of_one_process() {
         (&oriented, &[][..]),
         (&bumpy, &estimate[..]),
         (&lidar, &small[..]),
+        (&outlier, &[][..]),
     ]
     .into_iter()
     .enumerate()
     .filter(|(_, (i, _))| !i.is_empty())
     {
         let single = d.path().join(format!("single-{k}"));
-        ok(&ingest_args(inputs, &single, opts));
+        let line = ok(&ingest_args(inputs, &single, opts));
+        if inputs == &outlier {
+            let m = Store::open(&single).unwrap().manifest;
+            assert!(m.bounds.max[0] == 100.0, "{line}");
+        }
         for n in [1, 2, 3] {
             let (out, work) = (
                 d.path().join(format!("s{k}-{n}")),
