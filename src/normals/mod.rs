@@ -656,7 +656,7 @@ pub fn rewrite_cell(
 }
 
 /// The side file of cell `i` in `dir`.
-pub fn side_path(dir: &Path, i: usize) -> PathBuf {
+fn side_path(dir: &Path, i: usize) -> PathBuf {
     dir.join(format!("{i}.nrm"))
 }
 

@@ -29,6 +29,7 @@
 
 use std::ops::Range;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicUsize, Ordering};
 
 use serde::{Deserialize, Serialize};
 
@@ -248,10 +249,8 @@ fn items(
 ) -> Result<()> {
     let order = shard.order(n);
     for &claiming in shard.passes() {
-        for &i in &order {
-            if done(i) || (claiming && !dirs.claims.take(&format!("{prefix}{i}"))?) {
-                continue;
-            }
+        let cursor = AtomicUsize::new(0);
+        while let Some(i) = next_item(&order, &cursor, claiming, dirs, prefix, &done)? {
             work(i)?;
         }
     }
@@ -270,20 +269,14 @@ fn items_concurrent(
     ctx: &Ctx,
 ) -> Result<()> {
     use rayon::prelude::*;
-    use std::sync::atomic::{AtomicUsize, Ordering};
     let order = shard.order(n);
     for &claiming in shard.passes() {
-        let next = AtomicUsize::new(0);
+        let cursor = AtomicUsize::new(0);
         let worker = || -> Result<()> {
-            loop {
-                let Some(&i) = order.get(next.fetch_add(1, Ordering::Relaxed)) else {
-                    return Ok(());
-                };
-                if done(i) || (claiming && !dirs.claims.take(&format!("{prefix}{i}"))?) {
-                    continue;
-                }
+            while let Some(i) = next_item(&order, &cursor, claiming, dirs, prefix, &done)? {
                 work(i)?;
             }
+            Ok(())
         };
         let ended: Vec<Result<()>> = ctx.pool.install(|| {
             (0..ctx.threads().min(n.max(1)))
@@ -294,6 +287,24 @@ fn items_concurrent(
         ended.into_iter().collect::<Result<()>>()?;
     }
     Ok(())
+}
+
+/// The next item of `order`, from `cursor` on, to do in this pass: its checkpoint missing
+/// (`done`), and in a claiming pass its claim taken by this call.
+fn next_item(
+    order: &[usize],
+    cursor: &AtomicUsize,
+    claiming: bool,
+    dirs: &Dirs,
+    prefix: &str,
+    done: &impl Fn(usize) -> bool,
+) -> Result<Option<usize>> {
+    while let Some(&i) = order.get(cursor.fetch_add(1, Ordering::Relaxed)) {
+        if !done(i) && (!claiming || dirs.claims.take(&format!("{prefix}{i}"))?) {
+            return Ok(Some(i));
+        }
+    }
+    Ok(None)
 }
 
 /// Item `i`'s range of `n` things, `per` an item.

@@ -96,7 +96,7 @@ fn assemble_leaf(packs: &[Pack], hier: &Hierarchy, leaf: usize, dir: &Path) -> R
                 w.write_all(&buf).with_path(&path)?;
                 // The CRC-32 the frame had when it was compressed: a pack damaged since
                 // gives a cell that fails its check when read.
-                cell.copied(f.len as u64, f.crc32);
+                cell.wrote(f.len as u64, f.crc32);
             }
             cell.count += c.count;
             cell.bounds = cell.bounds.union(&c.bounds);

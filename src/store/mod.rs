@@ -68,7 +68,7 @@ pub use count::Partial;
 use input::Inputs;
 use manifest::{CellEntry, EstimatedNormals, MANIFEST, Manifest, STORE_FORMAT, STORE_VERSION};
 use octree::Hierarchy;
-use scatter::{CellOut, PackIndex, Scatter};
+use scatter::{CellOut, PackIndex, Scatter, Scattered};
 use split::Splitter;
 
 pub use info::{FileInfo, LasInfo, file_info};
@@ -368,8 +368,31 @@ impl Prepared {
         )
     }
 
-    /// Scatter `chunks` into the leaves of `hier` over `cube`, all of their frames into the
-    /// one file `pack`, its index appended (a part of pass 3, for a split ingest).
+    /// Scatter `chunks` into the leaves of `hier` over `cube`, `into` their cell files or one
+    /// pack (a part of pass 3), the cell buffers admitted by the budget meanwhile.
+    pub fn scatter(
+        &self,
+        into: ScatterInto,
+        chunks: &[(usize, ChunkSpec)],
+        cube: &Cube,
+        hier: &Hierarchy,
+        stage: &Stage,
+        ctx: &Ctx,
+    ) -> Result<Scattered> {
+        let _permit = ctx
+            .budget
+            .acquire(2 * self.cap as u64, "the cell buffers")?;
+        let keys: Vec<CellKey> = hier.leaves.iter().map(|l| l.key).collect();
+        let (layout, level) = (self.inputs.layout, self.params.zstd_level);
+        let sc = match into {
+            ScatterInto::Cells(dir) => Scatter::new(dir, &keys, layout, self.cap, level)?,
+            ScatterInto::Pack(pack) => Scatter::packed(pack, &keys, layout, self.cap, level)?,
+        };
+        scatter::scatter_pass(self, chunks, cube, hier, sc, stage, ctx)
+    }
+
+    /// [`Prepared::scatter`] into the one file `pack`, its index appended (a split ingest's
+    /// slice of the inputs).
     pub fn scatter_pack(
         &self,
         chunks: &[(usize, ChunkSpec)],
@@ -379,18 +402,7 @@ impl Prepared {
         stage: &Stage,
         ctx: &Ctx,
     ) -> Result<PackIndex> {
-        let _permit = ctx
-            .budget
-            .acquire(2 * self.cap as u64, "the cell buffers")?;
-        let keys: Vec<CellKey> = hier.leaves.iter().map(|l| l.key).collect();
-        let sc = Scatter::packed(
-            pack,
-            &keys,
-            self.inputs.layout,
-            self.cap,
-            self.params.zstd_level,
-        )?;
-        let out = scatter::scatter_pass(self, chunks, cube, hier, sc, stage, ctx)?;
+        let out = self.scatter(ScatterInto::Pack(pack), chunks, cube, hier, stage, ctx)?;
         let idx = out
             .pack
             .ok_or_else(|| Error::Internal("a packed scatter returned no index".into()))?;
@@ -428,6 +440,15 @@ impl Prepared {
             t0: self.t0,
         }
     }
+}
+
+/// Where a scatter writes its frames.
+#[derive(Debug, Clone, Copy)]
+pub enum ScatterInto<'a> {
+    /// One file per cell, in this directory.
+    Cells(&'a Path),
+    /// One pack file for every cell ([`Scatter::packed`]).
+    Pack(&'a Path),
 }
 
 /// What the count and split passes found about the whole store.
@@ -479,21 +500,13 @@ pub fn stage(inputs: &[InputSpec], out: &Path, params: &StoreParams, ctx: &Ctx) 
     drop(grid_permit);
 
     // Pass 3: scatter.
-    let scatter_permit = ctx
-        .budget
-        .acquire(2 * prep.cap as u64, "the cell buffers")?;
-    let keys: Vec<CellKey> = hier.leaves.iter().map(|l| l.key).collect();
-    let sc = Scatter::new(
-        &cells_dir,
-        &keys,
-        prep.inputs.layout,
-        prep.cap,
-        params.zstd_level,
-    )?;
     let stage = ctx
         .progress
         .stage("scatter", Some(prep.inputs.total), "points");
-    let cells_out = scatter::scatter_pass(&prep, &chunks, &cube, &hier, sc, &stage, ctx)?.cells;
+    let into = ScatterInto::Cells(&cells_dir);
+    let cells_out = prep
+        .scatter(into, &chunks, &cube, &hier, &stage, ctx)?
+        .cells;
     stage.finish(None);
 
     // Pass 4: split cells still over the limit.
@@ -501,7 +514,6 @@ pub fn stage(inputs: &[InputSpec], out: &Path, params: &StoreParams, ctx: &Ctx) 
     let (cells_out, oversized_cells) = prep
         .splitter(&cube, &cells_dir)
         .run(cells_out, &oversized, ctx)?;
-    drop(scatter_permit);
 
     let cells = cell_entries(&cells_out)?;
     let found = Found {
@@ -526,7 +538,7 @@ pub fn no_valid_points(inputs: &Inputs, bounds: &Aabb) -> Result<()> {
 
 /// The manifest entries of the non-empty cells, in key order; the files of empty cells are
 /// removed.
-pub fn cell_entries(cells_out: &[CellOut]) -> Result<Vec<CellEntry>> {
+fn cell_entries(cells_out: &[CellOut]) -> Result<Vec<CellEntry>> {
     let mut cells: Vec<CellEntry> = cells_out
         .iter()
         .filter(|c| c.count > 0)

@@ -228,15 +228,9 @@ impl CellOut {
         }
     }
 
-    /// Add the compressed bytes `z`, appended to its file.
-    pub fn wrote(&mut self, z: &[u8]) {
-        self.crc.update(z);
-        self.bytes += z.len() as u64;
-    }
-
-    /// Add `len` compressed bytes appended to its file, of CRC-32 `crc32` (taken when they
-    /// were compressed).
-    pub fn copied(&mut self, len: u64, crc32: u32) {
+    /// Add `len` compressed bytes appended to its file, of CRC-32 `crc32` (taken once, when
+    /// they were compressed: the file's CRC-32 is combined from its frames').
+    pub fn wrote(&mut self, len: u64, crc32: u32) {
         self.crc
             .combine(&crc32fast::Hasher::new_with_initial_len(crc32, len));
         self.bytes += len;
@@ -593,21 +587,27 @@ impl Scatter {
             .flat_map(|(i, b)| b.chunks(frame).map(move |f| (*i, f)))
             .collect();
         let level = self.zstd_level;
-        let frames: Vec<(usize, std::io::Result<Vec<u8>>)> = pool.install(|| {
+        // Each frame's CRC-32 is taken beside its compression, in parallel, once.
+        let frames: Vec<Result<(usize, Vec<u8>, u32)>> = pool.install(|| {
             jobs.par_iter()
-                .map(|&(i, f)| (i, zstd::bulk::compress(f, level)))
+                .map(|&(i, f)| {
+                    let z = zstd::bulk::compress(f, level)
+                        .map_err(|e| Error::Internal(format!("zstd compression failed: {e}")))?;
+                    let crc = crc32fast::hash(&z);
+                    Ok((i, z, crc))
+                })
                 .collect()
         });
-        for (i, z) in frames {
-            let z = z.map_err(|e| Error::Internal(format!("zstd compression failed: {e}")))?;
+        for compressed in frames {
+            let (i, z, crc32) = compressed?;
             let c = &mut self.cells[i];
-            c.wrote(&z);
+            c.wrote(z.len() as u64, crc32);
             let sent = match &mut self.pack {
                 Some(p) => {
                     let frame = Frame {
                         offset: p.bytes,
                         len: z.len() as u32,
-                        crc32: crc32fast::hash(&z),
+                        crc32,
                     };
                     p.frames.push((i as u32, frame));
                     p.bytes += z.len() as u64;

@@ -51,6 +51,10 @@ impl Splitter<'_> {
         if oversized.is_empty() {
             return Ok((cells, 0));
         }
+        // The sub-cells' buffers, as the scatter's (one split at a time).
+        let _permit = ctx
+            .budget
+            .acquire(2 * self.cap as u64, "the cell buffers")?;
         let mut stuck = 0;
         let stage = ctx
             .progress
