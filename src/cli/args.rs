@@ -666,6 +666,12 @@ pub struct ReconstructArgs {
     /// the GPU path is not yet measured faster end to end.
     #[arg(long, value_enum, default_value_t = GpuChoice::Off)]
     pub gpu: GpuChoice,
+    /// The leaves' fine solves (FFTs and conjugate gradients) on the GPU, batched. The
+    /// device computes in float32 where the CPU sums in float64, so the mesh differs from
+    /// the CPU's by rounding (a small fraction of a voxel); off (the default) keeps the
+    /// CPU's bytes.
+    #[arg(long, value_enum, default_value_t = GpuChoice::Off)]
+    pub gpu_solve: GpuChoice,
     /// Do one slice of the work, as one task of a cluster array job sharing --work-dir with
     /// the others: I/N (shard I of N, from 0), auto (SLURM's SLURM_ARRAY_TASK_ID and
     /// _COUNT) or auto/N (the index from SLURM, JOB_COMPLETION_INDEX under Kubernetes or
@@ -798,6 +804,9 @@ fn choice_message(e: &clap::Error) -> Option<String> {
     let err = |r: Result<(), scanflow::Error>| r.err().map(|e| e.to_string());
     match arg.split_whitespace().next()? {
         "--gpu" => err(value.parse::<GpuMode>().map(drop)),
+        "--gpu-solve" => Some(format!(
+            "--gpu-solve \"{value}\": expected one of auto, on, off"
+        )),
         "--normals" => err(value.parse::<NormalsMode>().map(drop)),
         "<SHAPE>" => err(value.parse::<Shape>().map(drop)),
         "--progress" => Some(format!(

@@ -492,6 +492,7 @@ impl ReconstructConfig {
         params.point_weight = point_weight;
         params.fit = !a.no_fit;
         params.gpu = a.gpu.into();
+        params.gpu_solve = a.gpu_solve.into();
         params.density = a.density;
         params.confidence = a.confidence;
         if let Some(sp) = a.samples_per_node

@@ -183,6 +183,7 @@ pub fn recon_options(c: &ReconstructConfig) -> Vec<(String, String)> {
                 .map_or("64 (default)".to_string(), |t| t.to_string()),
         ),
         ("--gpu", format!("{:?}", p.gpu).to_lowercase()),
+        ("--gpu-solve", format!("{:?}", p.gpu_solve).to_lowercase()),
         ("--shard", p.shard.to_string()),
         ("format", c.mesh.format.name().to_string()),
         ("--out-normals", c.mesh.normals.to_string()),

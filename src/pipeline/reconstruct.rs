@@ -84,6 +84,9 @@ pub struct ReconParams {
     /// off (the default: the GPU path is not yet measured faster end to end, see
     /// `extract::gpu`).
     pub gpu: crate::extract::gpu::GpuMode,
+    /// The leaves' fine solves on the GPU (`recon::gpu_solve`): auto, on, off (the default:
+    /// the CPU's bytes). The mesh differs from the CPU solve's by rounding.
+    pub gpu_solve: crate::extract::gpu::GpuMode,
     /// Move each vertex onto the plane of its nearest input points (see
     /// [`crate::surface::FIT_NEIGHBOURS`]).
     pub fit: bool,
@@ -129,6 +132,7 @@ impl ReconParams {
             confidence: false,
             samples_per_node: None,
             gpu: crate::extract::gpu::GpuMode::Off,
+            gpu_solve: crate::extract::gpu::GpuMode::Off,
             shard: Shard::ALL,
         }
     }
@@ -636,7 +640,7 @@ fn leaf_pass(
         tolerance: params.error * store.manifest.bounds.diagonal(),
         min_points: params.least_leaf_points(plan.leaf_voxels),
     };
-    let solvers = LeafSolvers::new(plan);
+    let solvers = LeafSolvers::new(plan).with_gpu(params.gpu_solve)?;
     // Fixed point for the blend (`extract::field`): the coarse values within 2^21 units;
     // leaf details are stored in it.
     let unit = unit_for(coarse.max_abs());
@@ -742,6 +746,24 @@ fn leaf_pass(
         if is_refined {
             refined.insert(*k);
         }
+    }
+    if let Some((name, g)) = solvers.gpu_stats() {
+        log::info!(
+            "GPU leaf solves on {name}: {} leaves in {} batches ({:.1} a batch, {} submissions), device thread busy {:.2} s{}",
+            g.leaves,
+            g.batches,
+            g.leaves as f64 / g.batches.max(1) as f64,
+            g.submissions,
+            g.busy_s,
+            if g.failed > 0 {
+                format!(
+                    ", {} leaves solved on the CPU after a GPU failure",
+                    g.failed
+                )
+            } else {
+                String::new()
+            }
+        );
     }
     stage.finish(None);
     let iso = if iso_count > 0 {

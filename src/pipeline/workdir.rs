@@ -133,6 +133,10 @@ impl RunIdentity {
             ("--min-points", params.min_points.to_string()),
             ("--trim", params.trim.to_string()),
             ("--no-fit", (!params.fit).to_string()),
+            (
+                "--gpu-solve",
+                crate::recon::gpu_solve::device_identity(params.gpu_solve)?,
+            ),
             ("--density", params.density.to_string()),
             ("--confidence", params.confidence.to_string()),
             (

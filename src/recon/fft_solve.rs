@@ -171,7 +171,7 @@ pub const SCREEN_TOLERANCE: f64 = 0.1;
 /// the screening sits on the surface, a few percent of the nodes, so the mean overstates it
 /// everywhere else. Measured on the same spheres at a tolerance of 0.01: 1/16 takes 7.4
 /// iterations a leaf, 1 takes 9.7, 4 takes 12, 1/100 takes 8.2.
-const PRECONDITIONER_SHIFT: f64 = 1.0 / 16.0;
+pub(crate) const PRECONDITIONER_SHIFT: f64 = 1.0 / 16.0;
 
 /// Iterations a screened solve never exceeds, whatever its residual.
 pub const SCREEN_MAX_ITERATIONS: u32 = 100;
@@ -297,11 +297,21 @@ impl Solver {
             grid.n,
             grid.h
         );
+        let div = self.divergence(grid, v);
+        let h1 = self.n / 2 + 1;
+        self.spectral(&div, true, |fz, fy, kx| {
+            self.filter[(fz * h1 + fy) * h1 + kx]
+        })
+    }
+
+    /// The divergence of splatted normals `v` (consumed) by central differences, in cube
+    /// units: the right-hand side of the solve. The splat is dropped on return, so a solve
+    /// peaks at the splat plus the divergence (16 bytes a node); the transform itself needs
+    /// about 8.
+    pub fn divergence(&self, grid: &LocalGrid, v: Vec<[f32; 3]>) -> Vec<f32> {
         let n = self.n;
         let len = grid.len();
         let half_inv_h = (0.5 * grid.unit / grid.h) as f32;
-        // Divergence by central differences, then the splat is dropped: the solve peaks at the
-        // splat plus the divergence (16 bytes a node); the transform itself needs about 8.
         let mut div = vec![0f32; len];
         div.par_chunks_mut(n * n).enumerate().for_each(|(z, slab)| {
             let zp = (z + 1) % n;
@@ -321,11 +331,13 @@ impl Solver {
                 }
             }
         });
-        drop(v);
-        let h1 = n / 2 + 1;
-        self.spectral(&div, true, |fz, fy, kx| {
-            self.filter[(fz * h1 + fy) * h1 + kx]
-        })
+        div
+    }
+
+    /// What a solve on the device needs of this solver: the nodes per axis, `|k|²` by
+    /// folded index (`n/2 + 1` values) and the Poisson filter (`(n/2 + 1)³` values).
+    pub fn tables(&self) -> (usize, &[f32], &[f32]) {
+        (self.n, &self.k2, &self.filter)
     }
 
     /// The screened solve (see [`super::screen`]): `(L + Sᵀ Γ S) χ = b + Sᵀ Γ c` by

@@ -3,7 +3,9 @@
 
 use super::coarse::CoarseField;
 use super::fft_solve::{LocalGrid, Solver};
+use super::gpu_solve::{GpuSolveStats, GpuSolver};
 use super::plan::Plan;
+use crate::extract::gpu::GpuMode;
 use crate::recon::pou::quantise_detail;
 use crate::types::{CellKey, Detail};
 
@@ -37,6 +39,8 @@ pub struct LeafDetail {
 pub struct LeafSolvers {
     fine: Solver,
     coarse: Solver,
+    /// The fine solves on a GPU (`--gpu-solve`), when one was opened.
+    gpu: Option<GpuSolver>,
 }
 
 impl LeafSolvers {
@@ -46,7 +50,21 @@ impl LeafSolvers {
         LeafSolvers {
             fine: Solver::new(&fine, plan.sigma_vox),
             coarse: Solver::new(&leaf_coarse_grid(plan, &fine), plan.sigma_vox),
+            gpu: None,
         }
+    }
+
+    /// The fine solves on a GPU as `mode` says ([`GpuSolver::new`]).
+    pub fn with_gpu(mut self, mode: GpuMode) -> crate::error::Result<LeafSolvers> {
+        self.gpu = GpuSolver::new(mode, &self.fine)?;
+        Ok(self)
+    }
+
+    /// What the GPU did, when the fine solves run on one.
+    pub fn gpu_stats(&self) -> Option<(String, GpuSolveStats)> {
+        self.gpu
+            .as_ref()
+            .map(|g| (g.adapter_name().to_string(), g.stats()))
     }
 }
 
@@ -73,7 +91,10 @@ pub fn solve_leaf(
     let fine = plan.leaf_fine_grid(key);
     let coarse_local = leaf_coarse_grid(plan, &fine);
     let alpha = plan.point_weight;
-    let (f, conv) = solvers.fine.solve_points(&fine, &pts.pos, &pts.nrm, alpha);
+    let (f, conv) = match &solvers.gpu {
+        Some(g) => g.solve_points(&solvers.fine, &fine, &pts.pos, &pts.nrm, alpha),
+        None => solvers.fine.solve_points(&fine, &pts.pos, &pts.nrm, alpha),
+    };
     let (c, _) = solvers
         .coarse
         .solve_points(&coarse_local, &pts.pos, &pts.nrm, alpha);

@@ -70,6 +70,7 @@ pub mod coarse;
 pub mod density;
 pub mod fft_solve;
 pub mod global;
+pub mod gpu_solve;
 pub mod leaf;
 pub mod plan;
 pub mod pou;

@@ -544,6 +544,16 @@ impl Screen {
         &self.gamma
     }
 
+    /// Each aggregate's 8 grid nodes.
+    pub fn nodes(&self) -> &[[u32; 8]] {
+        &self.nodes
+    }
+
+    /// Each aggregate's trilinear weights, by node.
+    pub fn weights(&self) -> &[[f32; 8]] {
+        &self.weights
+    }
+
     /// `S v`: the grid values `v` interpolated at each aggregate.
     pub fn gather(&self, v: &[f32]) -> Vec<f64> {
         self.nodes

@@ -1219,7 +1219,7 @@ fn option_cases(c: &mut Corpus) {
         "good.xyz",
         "0 0 0\n1 0 0\n0 1 0\n0 0 1\n".as_bytes(),
     );
-    let cases: [(&str, &str, &[&str], &str); 15] = [
+    let cases: [(&str, &str, &[&str], &str); 16] = [
         ("opt_depth_low", "o.ply", &["--depth", "2"], "--depth 2"),
         ("opt_depth_high", "o.ply", &["--depth", "14"], "--depth 14"),
         (
@@ -1258,6 +1258,12 @@ fn option_cases(c: &mut Corpus) {
             "--neighbours",
         ),
         ("opt_gpu_word", "o.ply", &["--gpu", "maybe"], "--gpu"),
+        (
+            "opt_gpu_solve_word",
+            "o.ply",
+            &["--gpu-solve", "maybe"],
+            "--gpu-solve",
+        ),
         ("opt_out_off", "o.off", &[], "o.off"),
         ("opt_out_no_dir", "missing/o.ply", &[], "missing"),
     ];

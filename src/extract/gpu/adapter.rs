@@ -28,7 +28,7 @@ fn make_instance() -> wgpu::Instance {
 }
 
 /// An adapter's name, type, backend and driver, for logs and errors.
-pub(super) fn describe(info: &wgpu::AdapterInfo) -> String {
+pub(crate) fn describe(info: &wgpu::AdapterInfo) -> String {
     format!(
         "{} ({:?}, {:?}, {} {})",
         info.name, info.device_type, info.backend, info.driver, info.driver_info
@@ -50,7 +50,7 @@ fn rank(mode: GpuMode, t: wgpu::DeviceType) -> Option<u8> {
 
 /// The best adapter with compute shaders that `mode` takes, if any, and the adapters found
 /// ("none" when there is none), for messages.
-pub(super) fn select(mode: GpuMode) -> (Option<wgpu::Adapter>, String) {
+pub(crate) fn select(mode: GpuMode) -> (Option<wgpu::Adapter>, String) {
     let instance = make_instance();
     let adapters = pollster::block_on(instance.enumerate_adapters(backends()));
     let found: Vec<String> = adapters.iter().map(|a| describe(&a.get_info())).collect();
@@ -74,29 +74,29 @@ pub(super) fn select(mode: GpuMode) -> (Option<wgpu::Adapter>, String) {
 
 /// Errors that wgpu reports outside an error scope, and the reason a device was lost.
 #[derive(Default)]
-pub(super) struct Trouble {
+pub(crate) struct Trouble {
     /// The first uncaptured error since it was last taken.
-    pub(super) uncaptured: Option<String>,
+    pub(crate) uncaptured: Option<String>,
     /// Why the device was lost, once it was.
-    pub(super) lost: Option<String>,
+    pub(crate) lost: Option<String>,
 }
 
 /// An opened device.
-pub(super) struct Opened {
-    pub(super) device: wgpu::Device,
-    pub(super) queue: wgpu::Queue,
+pub(crate) struct Opened {
+    pub(crate) device: wgpu::Device,
+    pub(crate) queue: wgpu::Queue,
     /// The adapter's limits, which the device was opened with.
-    pub(super) limits: wgpu::Limits,
+    pub(crate) limits: wgpu::Limits,
     /// Whether shaders have 64-bit integers (`wgpu::Features::SHADER_INT64`), which build
     /// blended fields on the device (`field.wgsl`).
-    pub(super) int64: bool,
+    pub(crate) int64: bool,
     /// Filled by the device's callbacks.
-    pub(super) trouble: Arc<Mutex<Trouble>>,
+    pub(crate) trouble: Arc<Mutex<Trouble>>,
 }
 
 /// Open `adapter` with its own limits (not wgpu's defaults) and 64-bit integers in shaders
 /// where it has them, with callbacks filling a [`Trouble`].
-pub(super) fn open_device(adapter: &wgpu::Adapter, info: &wgpu::AdapterInfo) -> GpuResult<Opened> {
+pub(crate) fn open_device(adapter: &wgpu::Adapter, info: &wgpu::AdapterInfo) -> GpuResult<Opened> {
     let limits = adapter.limits();
     let int64 = adapter.features().contains(wgpu::Features::SHADER_INT64);
     let required_features = if int64 {
@@ -137,7 +137,7 @@ pub(super) fn open_device(adapter: &wgpu::Adapter, info: &wgpu::AdapterInfo) -> 
 }
 
 /// Error scopes for out of memory, validation and internal errors, pushed in that order.
-pub(super) fn push_scopes(device: &wgpu::Device) -> [wgpu::ErrorScopeGuard; 3] {
+pub(crate) fn push_scopes(device: &wgpu::Device) -> [wgpu::ErrorScopeGuard; 3] {
     [
         device.push_error_scope(wgpu::ErrorFilter::OutOfMemory),
         device.push_error_scope(wgpu::ErrorFilter::Validation),
@@ -147,7 +147,7 @@ pub(super) fn push_scopes(device: &wgpu::Device) -> [wgpu::ErrorScopeGuard; 3] {
 
 /// Pop `scopes` (innermost first) and take what `trouble` holds: the errors, in that order,
 /// and the reason the device was lost, if it was (also the last error).
-pub(super) fn pop_scopes(
+pub(crate) fn pop_scopes(
     scopes: [wgpu::ErrorScopeGuard; 3],
     trouble: &Mutex<Trouble>,
 ) -> (Vec<String>, Option<String>) {

@@ -83,7 +83,7 @@
 //! maps and reads the device buffers, `leaf_pool` keeps the resident leaf grids, and
 //! `assemble` turns a sub-block's records into the tile's mesh on the host.
 
-mod adapter;
+pub(crate) mod adapter;
 mod assemble;
 mod buffers;
 mod leaf_pool;
