@@ -671,50 +671,25 @@ impl Device {
         }
         debug_assert_eq!(idx.len(), t_ent + e_total);
         let st = U::STORAGE | U::COPY_DST | U::COPY_SRC;
-        let vecs = ensure(
-            &dev,
+        let storage = |slot: &mut Option<wgpu::Buffer>, label: &str, bytes: usize| {
+            ensure(&dev, slot, label, bytes as u64, st)
+        };
+        let vecs = storage(
             &mut self.bufs.vecs,
             "solve vectors",
-            6 * stride as u64 * 4,
-            st,
+            6 * stride as usize * 4,
         );
-        let cpx = ensure(
-            &dev,
-            &mut self.bufs.cpx,
-            "solve spectrum",
-            (b * nn * 8) as u64,
-            st,
-        );
-        let ib = ensure(
-            &dev,
-            &mut self.bufs.idx,
-            "solve indices",
-            (idx.len() * 4) as u64,
-            st,
-        );
-        let swb = ensure(
-            &dev,
-            &mut self.bufs.sw,
-            "solve weights",
-            (sw.len() * 4) as u64,
-            st,
-        );
-        let sdyn = ensure(
-            &dev,
-            &mut self.bufs.sdyn,
-            "solve samples",
-            (s_total * 8) as u64,
-            st,
-        );
+        let cpx = storage(&mut self.bufs.cpx, "solve spectrum", b * nn * 8);
+        let ib = storage(&mut self.bufs.idx, "solve indices", idx.len() * 4);
+        let swb = storage(&mut self.bufs.sw, "solve weights", sw.len() * 4);
+        let sdyn = storage(&mut self.bufs.sdyn, "solve samples", s_total * 8);
         // The scalars, then each leaf's partial sums of a dot product (`vdot`).
         let parts = (nn / DOT_NODES).clamp(1, 64);
         let scal_bytes = (b * SLOTS * 4) as u64;
-        let scal = ensure(
-            &dev,
+        let scal = storage(
             &mut self.bufs.scal,
             "solve scalars",
-            (b * (SLOTS + parts) * 4) as u64,
-            st,
+            b * (SLOTS + parts) * 4,
         );
         let q = &self.queue;
         for (i, l) in leaves.iter().enumerate() {

@@ -109,15 +109,9 @@ fn fft(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) t:
     let shift = 32u - P.log2n;
     let total = lines * n;
     for (var e = t; e < total; e += WG) {
-        var j: u32;
-        var i: u32;
-        if P.axis == 0u {
-            j = e / n;
-            i = e % n;
-        } else {
-            j = e % lines;
-            i = e / lines;
-        }
+        let ji = line_element(e, lines);
+        let j = ji.x;
+        let i = ji.y;
         let at = line_at(b, first + j, i);
         var v: vec2<f32>;
         if (P.ends & 1u) != 0u {
@@ -150,15 +144,9 @@ fn fft(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) t:
     }
     let scale = 1.0 / f32(P.nn);
     for (var e = t; e < total; e += WG) {
-        var j: u32;
-        var i: u32;
-        if P.axis == 0u {
-            j = e / n;
-            i = e % n;
-        } else {
-            j = e % lines;
-            i = e / lines;
-        }
+        let ji = line_element(e, lines);
+        let j = ji.x;
+        let i = ji.y;
         let at = line_at(b, first + j, i);
         if (P.ends & 2u) != 0u {
             vecs[P.dst * P.stride + at] = sh[j * n + i].x * scale;
@@ -166,6 +154,15 @@ fn fft(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) t:
             cpx[at] = sh[j * n + i];
         }
     }
+}
+
+// Element e of a workgroup's lines as (line, node): lines along x node-fastest, lines along
+// y and z line-fastest (neighbouring lines are neighbouring x).
+fn line_element(e: u32, lines: u32) -> vec2<u32> {
+    if P.axis == 0u {
+        return vec2<u32>(e / P.n, e % P.n);
+    }
+    return vec2<u32>(e % lines, e / lines);
 }
 
 // Node i of line l (of n²) along `P.axis` in leaf b.
