@@ -64,8 +64,10 @@ use crate::error::{Error, Result};
 use crate::extract::gpu::GpuMode;
 use crate::extract::gpu::adapter::{self, Trouble, describe};
 
-/// Largest grid edge the device solve takes (one FFT line in workgroup memory).
-pub const MAX_N: usize = 1024;
+/// Largest grid edge the device solve takes: a leaf of 256³ nodes needs 512 MiB of device
+/// memory (`NODE_BYTES` a node), two fit in a batch's `BATCH_BYTES`; 512³ would not fit one.
+/// (An FFT line of up to 512 values fits the shader's workgroup memory.)
+pub const MAX_N: usize = 256;
 /// Bytes of device memory a batch may use at most.
 const BATCH_BYTES: u64 = 1 << 30;
 /// Leaves in a batch at most.
@@ -246,6 +248,15 @@ impl GpuSolver {
             return Ok(None);
         }
         let (best, found) = adapter::select(mode);
+        if let Some(a) = &best
+            && batch_cap(&a.limits(), (n * n * n) as u64) == 0
+        {
+            log::info!(
+                "leaf solves on the CPU: a grid of {n}³ nodes exceeds the buffers of {}",
+                describe(&a.get_info())
+            );
+            return Ok(None);
+        }
         let Some(ad) = best else {
             if mode == GpuMode::On {
                 return device_identity(mode).map(|_| None);
@@ -445,6 +456,17 @@ struct Device {
     bufs: Buffers,
 }
 
+/// Leaves of `nn` nodes a batch may hold on a device with `limits` (0: not one).
+fn batch_cap(limits: &wgpu::Limits, nn: u64) -> usize {
+    let max_binding = limits
+        .max_storage_buffer_binding_size
+        .min(limits.max_buffer_size);
+    let by_bytes = (BATCH_BYTES / (nn * NODE_BYTES))
+        .min(max_binding / (nn * 4 * 6))
+        .min((u32::MAX as u64) / (nn * 6));
+    (by_bytes as usize).min(MAX_BATCH)
+}
+
 /// A buffer of at least `size` bytes in `slot` (grown to the next power of two).
 fn ensure(
     device: &wgpu::Device,
@@ -478,17 +500,11 @@ impl Device {
         let (n, k2, filter) = solver.tables();
         let h1 = n / 2 + 1;
         let nn = (n * n * n) as u64;
-        let max_binding = limits
-            .max_storage_buffer_binding_size
-            .min(limits.max_buffer_size);
-        let by_bytes = (BATCH_BYTES / (nn * NODE_BYTES))
-            .min(max_binding / (nn * 4 * 6))
-            .min((u32::MAX as u64) / (nn * 6));
-        let max_batch = (by_bytes as usize).min(MAX_BATCH);
+        let max_batch = batch_cap(&limits, nn);
         if max_batch == 0 {
             return Err(format!(
-                "a leaf grid of {n}³ nodes exceeds the device's buffers ({} MiB)",
-                max_binding >> 20
+                "a leaf grid of {n}³ nodes exceeds the buffers of {}",
+                describe(&info)
             ));
         }
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);

@@ -121,3 +121,37 @@ fn a_leaf_gets_the_same_bits_in_any_batch() {
     });
     assert!(rel_diff(&plain, &rev[1].0) < 1e-4);
 }
+
+/// Dispatch grids cut into two dimensions (as for grids of 512³ and more, past 65535
+/// workgroups) run the workgroups beyond the work as no-ops: the same bits as one dimension.
+#[test]
+fn two_dimensional_dispatches_give_the_same_bits() {
+    if no_adapter() {
+        return;
+    }
+    let g = grid(16, 0.0);
+    let solver = Solver::new(&g, 1.0);
+    let (ad, _) = adapter::select(GpuMode::On);
+    let mut dev = Device::open(&ad.unwrap(), &solver).unwrap();
+    let leaves: Vec<Prepared> = [(0.0, 3000), (0.3, 2000)]
+        .iter()
+        .map(|&(shift, count)| {
+            let g = grid(16, shift);
+            let (pos, nrm) = sphere(count, 0.6);
+            let mut v = vec![[0f32; 3]; g.len()];
+            splat(&g, &pos, &nrm, &mut v);
+            Prepared::new(
+                solver.divergence(&g, v),
+                &Screen::from_points(&g, &pos, 8.0),
+            )
+        })
+        .collect();
+    let (one, _) = dev.run(leaves.iter().collect()).unwrap();
+    // 16³ nodes: 8 line groups of 32 lines, 16 node groups, ~40 sample groups; 5 a row
+    // leaves a partial last row in each.
+    dev.max_dim = 5;
+    let (two, _) = dev.run(leaves.iter().collect()).unwrap();
+    assert_eq!(one[0].0, two[0].0);
+    assert_eq!(one[1].0, two[1].0);
+    assert_eq!(one[0].1, two[0].1);
+}

@@ -85,7 +85,7 @@ fn flat_index(wg: vec3<u32>, t: u32) -> u32 {
     return (wg.y * P.gx + wg.x) * WG + t;
 }
 
-var<workgroup> sh: array<vec2<f32>, 1024>;
+var<workgroup> sh: array<vec2<f32>, 512>;
 var<workgroup> go: u32;
 
 // L = max(1, 512 / n) lines of n values along `P.axis` per workgroup (every thread one
@@ -106,6 +106,10 @@ fn fft(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) t:
     let n = P.n;
     let lines = max(1u, 512u / n);
     let first = (wg.y * P.gx + wg.x) * lines;
+    // A 2D grid of workgroups may have more than the n² / L needed.
+    if first >= n * n {
+        return;
+    }
     let shift = 32u - P.log2n;
     let total = lines * n;
     for (var e = t; e < total; e += WG) {
