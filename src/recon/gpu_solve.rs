@@ -12,7 +12,8 @@
 //! dispatch per step for the whole batch:
 //!
 //! 1. the Poisson solve: the divergence transformed along x, y and z (complex radix-2 FFTs,
-//!    one line per workgroup in workgroup memory, the twiddles tabulated in f64 on the host),
+//!    `max(1, 512/n)` lines per workgroup in workgroup memory, the twiddles tabulated in f64
+//!    on the host),
 //!    multiplied by the solver's filter table `−G_σ(k)/|k|²`, transformed back;
 //! 2. the screening's start: the solution gathered at the aggregates, per leaf `Σγ`, the
 //!    constant `c` and the shift `μ`, the residual `Sᵀ(−γ(Sx − c))`, the preconditioned
@@ -26,19 +27,25 @@
 //!    solve and the detail on the host.
 //!
 //! Only the divergence and the aggregates go up and only the solution comes down: a leaf's
-//! vectors stay on the device through its iterations, and the host reads a few scalars a
-//! leaf between iterations to learn which leaves still run.
+//! vectors stay on the device through its iterations, and the host reads 16 scalars a leaf
+//! every two iterations to learn which leaves still run.
+//!
+//! Measured on an H200 with 16 host cores (1M-point bumpy sphere, depth 11, leaves of 64³
+//! nodes): the leaf stage 27.8 s against 38.2 s on the CPU, batches of 4.3 leaves on average;
+//! for a 100M-point sphere's larger plan 51 against 48 leaves a second. The host's share of
+//! each leaf (splat, divergence, screen, the coarse local solve, the detail) and the one
+//! device thread bound it; see `scripts/bench_gpu.sh`.
 //!
 //! # What differs from the CPU solve
 //!
 //! The device's arithmetic is float32 throughout: the transforms are full complex radix-2
 //! FFTs (not rustfft's real-to-complex plans), and the sums (`rᵀz`, `pᵀLp`, `Σγs`) are
-//! float32 tree sums per workgroup where the host sums float64 in slabs. So the solution
-//! differs from the CPU's by rounding (relative `1e-5` to `1e-4` of the field's range,
-//! measured in the tests), the iteration count can differ by one where a leaf's residual
-//! sits at the tolerance, and the mesh differs from the CPU run's by a small fraction of a
-//! voxel (bounded in `tests/suite/recon.rs`). `--gpu-solve off` (the default) keeps the CPU
-//! path's bytes. On the device every leaf's arithmetic is independent of which leaves share
+//! float32 tree sums of fixed chunks, then of the chunks in order, where the host sums
+//! float64 in slabs. So the solution differs from the CPU's by rounding (2.5–3.4·10⁻⁷ of
+//! the field's range in the tests on lavapipe), the iteration count can differ by one
+//! where a leaf's residual sits at the tolerance, and the mesh differs from the CPU run's
+//! by a small fraction of a voxel (bounded in `tests/suite/recon.rs`). `--gpu-solve off`
+//! (the default) keeps the CPU path's bytes. On the device every leaf's arithmetic is independent of which leaves share
 //! its batch, and each sum has a fixed order, so the output is the same for any thread
 //! count and batch: the same bytes run to run on one device.
 //!
