@@ -227,7 +227,7 @@ pub struct GpuSolver {
     name: String,
     n: usize,
     stats: Arc<Mutex<GpuSolveStats>>,
-    warned: Mutex<bool>,
+    warned: std::sync::Once,
 }
 
 impl std::fmt::Debug for GpuSolver {
@@ -266,7 +266,7 @@ impl GpuSolver {
         }
         let Some(ad) = best else {
             if mode == GpuMode::On {
-                return device_identity(mode).map(|_| None);
+                return Err(adapter::none_found("--gpu-solve", &found));
             }
             log::info!("leaf solves on the CPU: no discrete or integrated GPU (adapters: {found})");
             return Ok(None);
@@ -339,7 +339,7 @@ impl GpuSolver {
             name,
             n,
             stats,
-            warned: Mutex::new(false),
+            warned: std::sync::Once::new(),
         }
     }
 
@@ -371,11 +371,9 @@ impl GpuSolver {
         match self.solve_prepared(Prepared::new(div, &screen)) {
             Ok(r) => r,
             Err(e) => {
-                let mut w = self.warned.lock().unwrap_or_else(|e| e.into_inner());
-                if !*w {
-                    log::warn!("a leaf solve failed on the GPU, solved on the CPU instead: {e}");
-                    *w = true;
-                }
+                self.warned.call_once(|| {
+                    log::warn!("a leaf solve failed on the GPU, solved on the CPU instead: {e}")
+                });
                 solver.solve_points(grid, pos, nrm, alpha)
             }
         }
@@ -409,11 +407,7 @@ pub fn device_identity(mode: GpuMode) -> Result<String> {
     }
     match adapter::select(mode) {
         (Some(a), _) => Ok(describe(&a.get_info())),
-        (None, found) if mode == GpuMode::On => Err(Error::Usage(format!(
-            "--gpu-solve on: wgpu found no GPU adapter with compute shaders (adapters: {found}); \
-             install a Vulkan driver (Mesa's lavapipe is in mesa-vulkan-drivers) or use \
-             --gpu-solve auto or off"
-        ))),
+        (None, found) if mode == GpuMode::On => Err(adapter::none_found("--gpu-solve", &found)),
         (None, _) => Ok("cpu".into()),
     }
 }

@@ -167,47 +167,25 @@ fn two_million_points_under_256m() {
         "--progress",
         "none",
     ]);
-    let o = run(&[
-        "ingest",
-        s(&ply),
-        "-o",
-        s(&store),
-        "--mem",
-        "256M",
-        "--progress",
-        "json",
-    ]);
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert!(o.status.success(), "{err}");
-    let st = Store::open(&store).unwrap();
-    assert_eq!(st.manifest.point_count, 2_000_000);
-    let peak = peak_rss(&err);
-    assert!(peak > 0, "no peak RSS reported: {err}");
+    // Ingest into `out` with `extra`: the store's point count checked, the peak RSS reported.
+    let peak_of = |out: &std::path::Path, extra: &[&str]| {
+        let mut args = vec!["ingest", s(&ply), "-o", s(out), "--progress", "json"];
+        args.extend_from_slice(extra);
+        let o = run(&args);
+        let err = String::from_utf8_lossy(&o.stderr).into_owned();
+        assert!(o.status.success(), "{err}");
+        assert_eq!(Store::open(out).unwrap().manifest.point_count, 2_000_000);
+        let peak = peak_rss(&err);
+        assert!(peak > 0, "no peak RSS reported: {err}");
+        peak
+    };
+    let peak = peak_of(&store, &["--mem", "256M"]);
     // The README states the margin: 64 MiB over --mem.
     assert!(peak < (256 + 64) << 20, "peak RSS {} MiB", peak >> 20);
     // A split ingest's task, under a quarter of that budget.
     let split = d.path().join("split.store");
-    let o = run(&[
-        "ingest",
-        s(&ply),
-        "-o",
-        s(&split),
-        "--shard",
-        "0/1",
-        "--mem",
-        "64M",
-        "--progress",
-        "json",
-    ]);
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert!(o.status.success(), "{err}");
-    assert_eq!(Store::open(&split).unwrap().manifest.point_count, 2_000_000);
-    let peak = peak_rss(&err);
-    assert!(
-        peak > 0 && peak < (64 + 64) << 20,
-        "peak RSS {} MiB",
-        peak >> 20
-    );
+    let peak = peak_of(&split, &["--shard", "0/1", "--mem", "64M"]);
+    assert!(peak < (64 + 64) << 20, "peak RSS {} MiB", peak >> 20);
 }
 
 #[test]

@@ -72,6 +72,16 @@ pub(crate) fn select(mode: GpuMode) -> (Option<wgpu::Adapter>, String) {
     (best, found)
 }
 
+/// The error of `OPTION on` (`--gpu`, `--gpu-solve`) when wgpu finds no adapter it can use;
+/// `found` lists the adapters it found ([`select`]).
+pub(crate) fn none_found(option: &str, found: &str) -> crate::error::Error {
+    crate::error::Error::Usage(format!(
+        "{option} on: wgpu found no GPU adapter with compute shaders (adapters: {found}); \
+         install a Vulkan driver (Mesa's lavapipe is in mesa-vulkan-drivers) or use \
+         {option} auto or off"
+    ))
+}
+
 /// Errors that wgpu reports outside an error scope, and the reason a device was lost.
 #[derive(Default)]
 pub(crate) struct Trouble {

@@ -258,11 +258,7 @@ impl GpuExtractor {
         let (best, found) = adapter::select(mode);
         let Some(adapter) = best else {
             if mode == GpuMode::On {
-                return Err(Error::Usage(format!(
-                    "--gpu on: wgpu found no GPU adapter with compute shaders (adapters: \
-                     {found}); install a Vulkan driver (Mesa's lavapipe is in \
-                     mesa-vulkan-drivers) or use --gpu auto or off"
-                )));
+                return Err(adapter::none_found("--gpu", &found));
             }
             log::info!(
                 "marching cubes on the CPU: no discrete or integrated GPU (adapters: {found})"

@@ -37,6 +37,28 @@ fn sphere(count: usize, r: f64) -> (Vec<[f64; 3]>, Vec<[f32; 3]>) {
     (pos, nrm)
 }
 
+/// A sphere of `count` points on `grid(16, shift)`, splatted, with its screen of weight 8.
+fn prepared(solver: &Solver, shift: f64, count: usize) -> Prepared {
+    let g = grid(16, shift);
+    let (pos, nrm) = sphere(count, 0.6);
+    Prepared::new(
+        solver.divergence(&g, splatted(&g, &pos, &nrm)),
+        &Screen::from_points(&g, &pos, 8.0),
+    )
+}
+
+fn splatted(g: &LocalGrid, pos: &[[f64; 3]], nrm: &[[f32; 3]]) -> Vec<[f32; 3]> {
+    let mut v = vec![[0f32; 3]; g.len()];
+    splat(g, pos, nrm, &mut v);
+    v
+}
+
+/// The device of the first adapter, for `solver`'s grids.
+fn device(solver: &Solver) -> Device {
+    let (ad, _) = adapter::select(GpuMode::On);
+    Device::open(&ad.unwrap(), solver).unwrap()
+}
+
 fn rel_diff(a: &[f32], b: &[f32]) -> f64 {
     let range = a.iter().fold(0f32, |m, v| m.max(v.abs())) as f64;
     let d = a
@@ -83,20 +105,10 @@ fn a_leaf_gets_the_same_bits_in_any_batch() {
         return;
     }
     let solver = Solver::new(&grid(16, 0.0), 1.0);
-    let (ad, _) = adapter::select(GpuMode::On);
-    let mut dev = Device::open(&ad.unwrap(), &solver).unwrap();
+    let mut dev = device(&solver);
     let leaves: Vec<Prepared> = [0.0, 0.25, 0.5]
         .iter()
-        .map(|&s| {
-            let g = grid(16, s);
-            let (pos, nrm) = sphere(1500 + (s * 4000.0) as usize, 0.6);
-            let mut v = vec![[0f32; 3]; g.len()];
-            splat(&g, &pos, &nrm, &mut v);
-            Prepared::new(
-                solver.divergence(&g, v),
-                &Screen::from_points(&g, &pos, 8.0),
-            )
-        })
+        .map(|&s| prepared(&solver, s, 1500 + (s * 4000.0) as usize))
         .collect();
     let (all, _) = dev.run(leaves.iter().collect()).unwrap();
     for (i, l) in leaves.iter().enumerate() {
@@ -112,40 +124,23 @@ fn a_leaf_gets_the_same_bits_in_any_batch() {
     assert_eq!(rev[0].0, all[2].0);
     assert_eq!(rev[3].0, all[0].0);
     assert_eq!(rev[1].1.iterations, 0);
-    let plain = solver.solve_splatted(&grid(16, 0.0), {
-        let g = grid(16, 0.0);
-        let (pos, nrm) = sphere(1500, 0.6);
-        let mut v = vec![[0f32; 3]; g.len()];
-        splat(&g, &pos, &nrm, &mut v);
-        v
-    });
+    let g = grid(16, 0.0);
+    let (pos, nrm) = sphere(1500, 0.6);
+    let plain = solver.solve_splatted(&g, splatted(&g, &pos, &nrm));
     assert!(rel_diff(&plain, &rev[1].0) < 1e-4);
 }
 
-/// Dispatch grids cut into two dimensions (as for grids of 512³ and more, past 65535
-/// workgroups) run the workgroups beyond the work as no-ops: the same bits as one dimension.
+/// Dispatch grids cut into two dimensions (as for the node-wise kernels of a 256³ grid,
+/// 65536 workgroups a leaf) run the workgroups beyond the work as no-ops: the same bits as
+/// one dimension.
 #[test]
 fn two_dimensional_dispatches_give_the_same_bits() {
     if no_adapter() {
         return;
     }
-    let g = grid(16, 0.0);
-    let solver = Solver::new(&g, 1.0);
-    let (ad, _) = adapter::select(GpuMode::On);
-    let mut dev = Device::open(&ad.unwrap(), &solver).unwrap();
-    let leaves: Vec<Prepared> = [(0.0, 3000), (0.3, 2000)]
-        .iter()
-        .map(|&(shift, count)| {
-            let g = grid(16, shift);
-            let (pos, nrm) = sphere(count, 0.6);
-            let mut v = vec![[0f32; 3]; g.len()];
-            splat(&g, &pos, &nrm, &mut v);
-            Prepared::new(
-                solver.divergence(&g, v),
-                &Screen::from_points(&g, &pos, 8.0),
-            )
-        })
-        .collect();
+    let solver = Solver::new(&grid(16, 0.0), 1.0);
+    let mut dev = device(&solver);
+    let leaves = [prepared(&solver, 0.0, 3000), prepared(&solver, 0.3, 2000)];
     let (one, _) = dev.run(leaves.iter().collect()).unwrap();
     // 16³ nodes: 8 line groups of 32 lines, 16 node groups, ~40 sample groups; 5 a row
     // leaves a partial last row in each.
