@@ -612,6 +612,12 @@ pub struct ReconstructArgs {
     /// block and lowered to the whole grid where needed). Same output for any tile size.
     #[arg(long)]
     pub tile: Option<u64>,
+    /// The deepest the dense global coarse solve may be, 4 to depth − 2 (default: as deep
+    /// as --mem allows, at most 8, i.e. 256 cells per edge). Levels of leaves fill the
+    /// octaves between it and --depth, two at a time: a shallower coarse solve adds levels,
+    /// less memory and a different surface (within the method's accuracy).
+    #[arg(long, value_name = "D")]
+    pub coarse_depth: Option<u32>,
     /// Work directory for the ingested store, the leaf and tile checkpoints and the run
     /// description (default: OUTPUT.work).
     #[arg(long)]

@@ -448,11 +448,21 @@ impl ReconstructConfig {
                 TILES.end()
             );
         }
+        let shallowest = scanflow::recon::plan::MIN_DENSE_DEPTH - 2;
+        if let Some(c) = a.coarse_depth
+            && !(shallowest..=a.depth.saturating_sub(2)).contains(&c)
+        {
+            bail!(
+                "--coarse-depth {c}: expected {shallowest} to {} (two octaves below --depth {} at most)",
+                a.depth.saturating_sub(2),
+                a.depth
+            );
+        }
         let screened = point_weight != PointWeight::Fixed(0.0);
         let least = scanflow::pipeline::reconstruct::least_mem(a.depth, screened);
         if run.mem_bytes < least {
             bail!(
-                "--mem {}: a reconstruction at --depth {} needs at least {} (its coarse solve, then the coarse solution beside one leaf solve, each with the sampling-density grid, at the coarse ratio that needs least); raise --mem or lower --depth",
+                "--mem {}: a reconstruction at --depth {} needs at least {} (the floor of every reconstruction, where its levels of leaves over the smallest coarse solve fit); raise --mem",
                 human_bytes(run.mem_bytes),
                 a.depth,
                 human_bytes(least)
@@ -484,6 +494,7 @@ impl ReconstructConfig {
         let work_dir = work_dir(a.work_dir, &a.output)?;
         let mut params = ReconParams::new(a.depth, work_dir);
         params.tile_voxels = a.tile;
+        params.coarse_depth = a.coarse_depth;
         params.resume = a.resume;
         params.error = error;
         params.min_points = a.min_points;

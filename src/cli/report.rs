@@ -79,8 +79,21 @@ pub fn reconstruct(st: &ReconStats, out: &Path, total_secs: f64) {
     } else {
         String::new()
     };
+    // The levels above the finest, top first: "over 812 leaves (640 refined) at depth 9".
+    let above: String = st
+        .levels_above
+        .iter()
+        .map(|l| {
+            format!(
+                " over {} leaves ({} refined) at depth {}",
+                l.leaves, l.refined, l.depth
+            )
+        })
+        .rev()
+        .collect::<Vec<_>>()
+        .join(",");
     outln!(
-        "reconstructed {} vertices, {} triangles into {} in {:.2} s (solve and mesh {:.2} s; {} leaves, {} refined{screened}; iso-value of the field {:.4}), peak memory {}",
+        "reconstructed {} vertices, {} triangles into {} in {:.2} s (solve and mesh {:.2} s; {} leaves, {} refined{above}{screened}; iso-value of the field {:.4}), peak memory {}",
         st.vertices,
         st.faces,
         out.display(),

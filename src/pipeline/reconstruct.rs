@@ -24,8 +24,8 @@ use crate::recon::checkpoint::{LeafSummary, leaf_path, read_leaf_summary, write_
 use crate::recon::density::DensityGrid;
 use crate::recon::pou::unit_for;
 use crate::recon::{
-    CoarseField, DEFAULT_ERROR, DEFAULT_MIN_POINTS, LeafDetail, LeafRule, LeafSolvers, Moments,
-    Plan, PlanBudget, PointWeight, fft_solve, refine_leaf,
+    CoarseField, DEFAULT_ERROR, DEFAULT_MIN_POINTS, LeafDetail, LeafRule, LeafSolvers, Level,
+    Moments, Plan, PlanBudget, PointWeight, fft_solve, refine_leaf,
     screen::{NOISE_KEY_BYTES, NoiseStats, ScreenBuilder},
     solve_coarse,
 };
@@ -57,6 +57,9 @@ pub struct ReconParams {
     pub point_weight: PointWeight,
     /// Tile edge in fine voxels (`None`: 64, at least one leaf, at most the cube).
     pub tile_voxels: Option<u64>,
+    /// The deepest the dense coarse solve may be (`--coarse-depth`; `None`: as deep as
+    /// [`crate::recon::plan::levels`] allows); a shallower one adds levels of leaves.
+    pub coarse_depth: Option<u32>,
     /// Work directory (leaf checkpoints, run description).
     pub work_dir: PathBuf,
     /// Reuse the leaves a previous run with the same inputs and options left in `work_dir`.
@@ -122,6 +125,7 @@ impl ReconParams {
             point_weight: PointWeight::Standard,
             fit: true,
             tile_voxels: None,
+            coarse_depth: None,
             work_dir,
             resume: false,
             error: DEFAULT_ERROR,
@@ -169,6 +173,9 @@ pub struct ReconStats {
     pub jet_noise_voxels: Option<f64>,
     /// Conjugate-gradient iterations of the screened coarse solve.
     pub coarse_iterations: u32,
+    /// The levels of leaves above the finest (the recursive scheme, from the top down; none
+    /// where the dense coarse solve is the finest level's coarse field).
+    pub levels_above: Vec<LevelStats>,
     /// Leaves whose fine solve ran in this run (refined and not reused).
     pub leaves_solved: usize,
     /// Conjugate-gradient iterations of the leaves' screened fine solves, summed over the
@@ -191,6 +198,27 @@ pub struct ReconStats {
     /// The picture of the mesh, when asked for.
     #[serde(skip)]
     pub preview: Option<crate::io::preview::Preview>,
+}
+
+/// One level of leaves above the finest ([`crate::recon::plan::levels`]).
+#[derive(Debug, Clone, Serialize)]
+pub struct LevelStats {
+    /// The level's depth.
+    pub depth: u32,
+    /// Its leaves holding points.
+    pub leaves: usize,
+    /// Those refined by a fine solve.
+    pub refined: usize,
+    /// Those read back from checkpoints.
+    pub reused: usize,
+}
+
+/// The ancestor of `key` at `level` (at most `key`'s level).
+fn ancestor(mut key: CellKey, level: u32) -> CellKey {
+    while key.level() > level {
+        key = key.parent();
+    }
+    key
 }
 
 /// The leaves seen from above (along −z): per column `(x, y)` of the leaf grid, how many
@@ -247,19 +275,71 @@ pub fn reconstruct(
         // Other tasks, maybe on other hosts, write into the same work directory.
         crate::io::atomic::tag_temps_with_host();
     }
-    let mut plan = plan_run(store, params, ctx)?;
-    let dirs = workdir::prepare(store, &plan, params)?;
-    let mut coarse = coarse_pass(store, &plan, params.point_weight, ctx)?;
+    let mut levels = plan_run(store, params, ctx)?;
+    let dirs = workdir::prepare(store, &levels, params)?;
+    let top = *levels.last().expect("a plan has a level");
+    let coarse = coarse_pass(store, &levels[0], &top, params.point_weight, ctx)?;
     // The weight the coarse solve used, for every leaf (`auto` measures it there).
-    plan.point_weight = coarse.point_weight;
-    plan.noise_voxels = coarse.noise.sigma_voxels();
+    for p in &mut levels {
+        p.point_weight = coarse.point_weight;
+        p.noise_voxels = coarse.noise.sigma_voxels();
+    }
+    let plan = levels[0];
     let point_cap = ctx
         .budget
         .share(Share::PointCache)
         .min(POINT_CACHE_MAX_BYTES);
-    let mut src = PointSource::new(store, plan, point_cap, Arc::clone(&coarse.density));
     let _cache_permit = ctx.budget.acquire_now(point_cap, "the store cell cache")?;
-    let leaves = leaf_pass(store, &plan, params, &mut coarse, &dirs, &mut src, ctx)?;
+    let CoarsePass {
+        field,
+        density,
+        _permit: _coarse_permit,
+        occupied,
+        support,
+        iterations: coarse_iterations,
+        noise,
+        ..
+    } = coarse;
+    // Fixed point for the blend (`extract::field`): the coarse values within 2^21 units;
+    // every level's details are stored in it.
+    let unit = unit_for(field.max_abs());
+    // The levels above the finest, from the top down: each is the coarse field of the next,
+    // with a cache of its details (a sixteenth of the budget between them).
+    let level_cache = ctx.budget.total() / 16 / levels.len().saturating_sub(1).max(1) as u64;
+    let _level_permit = if levels.len() > 1 {
+        Some(ctx.budget.acquire_now(
+            level_cache * (levels.len() as u64 - 1),
+            "the caches of the upper levels' details",
+        )?)
+    } else {
+        None
+    };
+    let mut field = field;
+    let mut above = Vec::new();
+    for k in (1..levels.len()).rev() {
+        let p = levels[k];
+        let keys: BTreeSet<CellKey> = occupied
+            .iter()
+            .map(|&key| ancestor(key, p.leaf_level))
+            .collect();
+        let mut src = PointSource::new(store, p, point_cap, Arc::clone(&density));
+        let name = format!("leaves at depth {}", p.depth);
+        let lp = leaf_pass(
+            store, &p, params, keys, &field, unit, &dirs, &mut src, &name, ctx,
+        )?;
+        above.push(LevelStats {
+            depth: p.depth,
+            leaves: lp.all.len(),
+            refined: lp.refined.len(),
+            reused: lp.reused,
+        });
+        let level = Level::new(p, field, lp.refined, dirs.leaves.clone(), unit, level_cache);
+        field = CoarseField::level(level, levels[k - 1].coarse_ratio);
+    }
+    let mut src = PointSource::new(store, plan, point_cap, Arc::clone(&density));
+    let leaves = leaf_pass(
+        store, &plan, params, occupied, &field, unit, &dirs, &mut src, "leaves", ctx,
+    )?;
     let m = &store.manifest;
     let (with_color, with_intensity) = (m.attributes.color, m.attributes.intensity);
     let points = (with_color || with_intensity || params.fit || params.measures_density())
@@ -267,8 +347,8 @@ pub fn reconstruct(
     let job = TileJob {
         plan: &plan,
         params,
-        coarse: &coarse.field,
-        support: &coarse.support,
+        coarse: &field,
+        support: &support,
         refined: &leaves.refined,
         iso: leaves.iso,
         unit: leaves.unit,
@@ -280,7 +360,7 @@ pub fn reconstruct(
         input: &store.dir,
         bounds: m.bounds,
     };
-    let nonempty = tiles::nonempty_tiles(&job);
+    let nonempty = tiles::nonempty_tiles(&job, &ctx.pool)?;
     let split = params.shard.is_split();
     if split {
         // What `merge` welds; every shard writes the same description.
@@ -310,8 +390,9 @@ pub fn reconstruct(
         iso: leaves.iso,
         point_weight: plan.point_weight,
         noise_voxels: plan.noise_voxels,
-        jet_noise_voxels: coarse.noise.jet_sigma_voxels(),
-        coarse_iterations: coarse.iterations,
+        jet_noise_voxels: noise.jet_sigma_voxels(),
+        coarse_iterations,
+        levels_above: above,
         leaves_solved: leaves.solved,
         leaf_iterations: leaves.iterations,
         leaf_voxels: plan.leaf_voxels,
@@ -363,8 +444,9 @@ pub fn weigh_normals(b: &mut PointBatch, confidence: bool, density: &DensityGrid
     }
 }
 
-/// Check that `store` can be reconstructed and choose the grids.
-fn plan_run(store: &Store, params: &ReconParams, ctx: &Ctx) -> Result<Plan> {
+/// Check that `store` can be reconstructed and choose the grids: the levels, finest first
+/// ([`crate::recon::plan::levels`]).
+fn plan_run(store: &Store, params: &ReconParams, ctx: &Ctx) -> Result<Vec<Plan>> {
     let m = &store.manifest;
     if !m.attributes.normal {
         return Err(Error::input(
@@ -387,7 +469,7 @@ fn plan_run(store: &Store, params: &ReconParams, ctx: &Ctx) -> Result<Plan> {
             "--confidence: the points carry no confidence (a PLY vertex property \"confidence\") and their normals were estimated (unit length), so there is nothing to weigh them by",
         ));
     }
-    let mut plan = Plan::new(
+    let mut levels = crate::recon::plan::levels(
         m.cube,
         params.depth,
         params.sigma_vox,
@@ -395,10 +477,13 @@ fn plan_run(store: &Store, params: &ReconParams, ctx: &Ctx) -> Result<Plan> {
         // are sized for a screened solve, and the coarse pass sets the weight (never to 0).
         params.point_weight.alpha(&NoiseStats::default()),
         params.tile_voxels,
+        params.coarse_depth,
         plan_budget(ctx.budget.total()),
     )?;
-    plan.confidence = params.confidence;
-    Ok(plan)
+    for p in &mut levels {
+        p.confidence = params.confidence;
+    }
+    Ok(levels)
 }
 
 /// What a budget of `total` bytes gives the grids ([`Share`]): the coarse solve's scratch its
@@ -411,11 +496,17 @@ fn plan_budget(total: u64) -> PlanBudget {
     }
 }
 
-/// The smallest `--mem` a reconstruction at `depth` can be planned in (screened or not): at
-/// the best coarse ratio, its coarse solve's scratch, and then its coarse solution beside one
-/// leaf solve and the point cache, within their slices ([`Plan::least_budget`]).
+/// The least `--mem` of any reconstruction: below it the point cache, a wave of one leaf
+/// solve, one tile and the waves of the passes over the store are not worth planning for.
+/// Measured: a 1M-point sphere at depth 10 peaks at 73 MiB under `--mem 64M` (README).
+pub const MEM_FLOOR: u64 = 64 << 20;
+
+/// The smallest `--mem` a reconstruction at `depth` can be planned in (screened or not): the
+/// floor ([`MEM_FLOOR`]), or more where the smallest top level's coarse solve, and then its
+/// coarse solution beside one leaf solve and the point cache, need more
+/// ([`Plan::least_budget`]).
 pub fn least_mem(depth: u32, screened: bool) -> u64 {
-    Plan::least_budget(depth, screened, |need| {
+    let grids = Plan::least_budget(depth, screened, |need| {
         // The smallest total whose slices hold `need`: they grow with the total.
         let fits = |t: u64| {
             let b = plan_budget(t);
@@ -431,7 +522,8 @@ pub fn least_mem(depth: u32, screened: bool) -> u64 {
             }
         }
         hi
-    })
+    });
+    grids.max(MEM_FLOOR)
 }
 
 /// What the coarse pass leaves: the coarse solution (its permit held while it lives), the
@@ -502,10 +594,17 @@ fn density_pass(store: &Store, plan: &Plan, ctx: &Ctx) -> Result<DensityGrid> {
     Ok(grid)
 }
 
-/// Pass 1: splat every point into the coarse grid, each normal weighed by its sample's
-/// share of the surface (pass 0); collect occupied leaf cells, the coarse voxels holding
-/// points, and the moments that refuse planar and linear inputs; solve.
-fn coarse_pass(store: &Store, plan: &Plan, weight: PointWeight, ctx: &Ctx) -> Result<CoarsePass> {
+/// Pass 1: splat every point into the coarse grid of `plan` (the top level), each normal
+/// weighed by its sample's share of the surface (pass 0); collect the occupied leaf cells of
+/// `fine` (the finest level), the noise in its voxels, the coarse voxels holding points, and
+/// the moments that refuse planar and linear inputs; solve.
+fn coarse_pass(
+    store: &Store,
+    fine: &Plan,
+    plan: &Plan,
+    weight: PointWeight,
+    ctx: &Ctx,
+) -> Result<CoarsePass> {
     let m = &store.manifest;
     let cgrid = plan.coarse_grid();
     let permit = ctx.budget.acquire_now(
@@ -543,7 +642,7 @@ fn coarse_pass(store: &Store, plan: &Plan, weight: PointWeight, ctx: &Ctx) -> Re
             ids.par_iter()
                 .map(|&j| {
                     let mut b = store.read_cell(j)?;
-                    let st = NoiseStats::of(&b.pos, &b.normal, plan.cube.origin, plan.spacing);
+                    let st = NoiseStats::of(&b.pos, &b.normal, fine.cube.origin, fine.spacing);
                     weigh_normals(&mut b, plan.confidence, &density);
                     Ok((b, st))
                 })
@@ -567,8 +666,8 @@ fn coarse_pass(store: &Store, plan: &Plan, weight: PointWeight, ctx: &Ctx) -> Re
             for p in &b.pos {
                 support.mark([0, 1, 2].map(|a| p[a] - origin[a]));
                 occupied.insert(CellKey::new(
-                    plan.leaf_level,
-                    plan.cube.cell_coords(*p, plan.leaf_level),
+                    fine.leaf_level,
+                    fine.cube.cell_coords(*p, fine.leaf_level),
                 ));
                 moments.add(*p);
             }
@@ -603,6 +702,15 @@ fn coarse_pass(store: &Store, plan: &Plan, weight: PointWeight, ctx: &Ctx) -> Re
     })
 }
 
+/// Bytes a leaf of `plan` reads of one level above it ([`CoarseField::local`]): the details
+/// of the (at most 8) leaves of that level near it, and their blend on a window of
+/// `(E/r + 4)³` nodes (8 bytes a node for the sum, 4 for the values).
+fn window_bytes(plan: &Plan) -> u64 {
+    let m = plan.detail_n() as u64;
+    let w = plan.leaf_voxels / plan.coarse_ratio + 4;
+    8 * 2 * m * m * m + 12 * w * w * w
+}
+
 /// What the leaf pass leaves: every occupied leaf, the refined ones, how many were reused, the
 /// iso-value and the blend's fixed-point unit.
 struct LeafPass {
@@ -620,30 +728,31 @@ struct LeafPass {
 /// resumed run, or by another shard) are summed from their checkpoints' headers. A shard
 /// visits the leaves in its order ([`Shard::order`]); the iso-value is summed in Morton order
 /// whoever solved each leaf.
+#[allow(clippy::too_many_arguments)]
 fn leaf_pass(
     store: &Store,
     plan: &Plan,
     params: &ReconParams,
-    coarse: &mut CoarsePass,
+    leaves: BTreeSet<CellKey>,
+    coarse: &CoarseField,
+    unit: f32,
     dirs: &WorkDir,
     src: &mut PointSource,
+    stage_name: &str,
     ctx: &Ctx,
 ) -> Result<LeafPass> {
-    let leaves: Vec<CellKey> = std::mem::take(&mut coarse.occupied).into_iter().collect();
-    let coarse = &coarse.field;
-    let fine_bytes = plan.leaf_scratch_bytes();
+    let leaves: Vec<CellKey> = leaves.into_iter().collect();
+    // A solve, and the window of the levels above it reads: each level's details near it.
+    let fine_bytes = plan.leaf_scratch_bytes() + coarse.levels() as u64 * window_bytes(plan);
     let stage = ctx
         .progress
-        .stage("leaves", Some(leaves.len() as u64), "leaves");
+        .stage(stage_name, Some(leaves.len() as u64), "leaves");
     let (mut solved, mut iterations) = (0, 0u64);
     let rule = LeafRule {
         tolerance: params.error * store.manifest.bounds.diagonal(),
         min_points: params.least_leaf_points(plan.leaf_voxels),
     };
     let solvers = LeafSolvers::new(plan).with_gpu(params.gpu_solve)?;
-    // Fixed point for the blend (`extract::field`): the coarse values within 2^21 units;
-    // leaf details are stored in it.
-    let unit = unit_for(coarse.max_abs());
     let reuse = params.resume || params.shard.is_split();
     let claims = Claims::new(&dirs.claims);
     let order = params.shard.order(leaves.len());
@@ -703,7 +812,7 @@ fn leaf_pass(
                 res.extend(ctx.pool.install(|| {
                     g.par_iter()
                         .map(|(k, p)| {
-                            let d = refine_leaf(plan, unit, &solvers, *k, p, coarse, &rule);
+                            let d = refine_leaf(plan, unit, &solvers, *k, p, coarse, &rule)?;
                             write_leaf(&dirs.leaves, *k, &d)?;
                             stage.inc(1);
                             Ok(d)
@@ -795,39 +904,32 @@ mod tests {
     use super::*;
     use crate::types::Cube;
 
-    /// At the least budget of a depth a plan's coarse solve and leaf pass fit their slices;
-    /// a little less fits no coarse ratio.
+    /// At the least budget of every depth the levels' top coarse solve and leaf pass fit
+    /// their slices, and it is never below the floor.
     #[test]
-    fn the_least_budget_plans_and_less_does_not() {
+    fn the_least_budget_plans_every_depth() {
         let cube = Cube {
             origin: [0.0; 3],
             size: 1.0,
         };
-        for depth in 7..=12 {
+        for depth in 7..=13 {
             for screened in [false, true] {
                 let least = least_mem(depth, screened);
+                assert!(least >= MEM_FLOOR);
                 let b = plan_budget(least);
                 let alpha = if screened { 4.0 } else { 0.0 };
-                let p = Plan::new(cube, depth, 1.0, alpha, None, b).unwrap();
-                let need = Plan::needs(depth, p.coarse_ratio, screened);
+                let levels =
+                    crate::recon::plan::levels(cube, depth, 1.0, alpha, None, None, b).unwrap();
+                let top = levels.last().unwrap();
+                let need = Plan::needs(top.depth, top.coarse_ratio, screened);
                 assert!(
                     need.coarse <= b.coarse && need.leaf <= b.leaf,
-                    "depth {depth}"
+                    "depth {depth}: {levels:?}"
                 );
                 assert_eq!(
-                    p.coarse_field_bytes() + p.density_bytes() + p.leaf_scratch_bytes(),
+                    top.coarse_field_bytes() + top.density_bytes() + top.leaf_scratch_bytes(),
                     need.leaf
                 );
-                let less = plan_budget(least - (1 << 20));
-                let mut r = 4;
-                while 8 * r < 1 << depth {
-                    let need = Plan::needs(depth, r, screened);
-                    assert!(
-                        need.coarse > less.coarse || need.leaf > less.leaf,
-                        "depth {depth}"
-                    );
-                    r *= 2;
-                }
             }
         }
     }

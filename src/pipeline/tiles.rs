@@ -230,17 +230,26 @@ pub fn run(
 /// The tiles that can hold surface, by Morton index: those a refined leaf reaches or over which
 /// the coarse solution crosses the iso-value. Every one is extracted and checkpointed (its
 /// mesh may still be empty); the others are skipped by every shard and by `merge`.
-pub fn nonempty_tiles(job: &TileJob) -> Vec<u64> {
+///
+/// Errors: those of reading a level above in the recursive scheme ([`CoarseField::range`]).
+pub fn nonempty_tiles(job: &TileJob, pool: &rayon::ThreadPool) -> Result<Vec<u64>> {
     let plan = job.plan;
     let ntiles_axis = plan.fine_cells / plan.tile;
-    (0..ntiles_axis.pow(3))
-        .filter(|&t| {
-            let (lo, hi) = tile_box(plan, t);
-            let near = leaves_near(plan, job.refined, lo, hi);
-            let (mn, mx) = job.coarse.range(lo, hi);
-            !(near.is_empty() && (mn as f64 > job.iso || (mx as f64) < job.iso))
-        })
-        .collect()
+    // In parallel: above a level of leaves a tile's range may blend a window of it.
+    let keep: Vec<Result<Option<u64>>> = pool.install(|| {
+        (0..ntiles_axis.pow(3))
+            .into_par_iter()
+            .map(|t| {
+                let (lo, hi) = tile_box(plan, t);
+                if !leaves_near(plan, job.refined, lo, hi).is_empty() {
+                    return Ok(Some(t));
+                }
+                let (mn, mx) = job.coarse.range(lo, hi)?;
+                Ok((!(mn as f64 > job.iso || (mx as f64) < job.iso)).then_some(t))
+            })
+            .collect()
+    });
+    keep.into_iter().filter_map(Result::transpose).collect()
 }
 
 /// The lowest and highest fine nodes of tile `t` (Morton index).
@@ -761,7 +770,7 @@ fn extract_cpu(
                 let Some(ds) = ds else {
                     return Ok((*tt, read_tile(&tile_path(job.tiles_dir, *tt))?));
                 };
-                let f = tile_blend(plan, &own, job.coarse, job.unit, *lo, ds).eval();
+                let f = tile_blend(plan, &own, job.coarse, job.unit, *lo, ds)?.eval();
                 let mut mesh = TileMesh::default();
                 ws.extract(
                     &f,
@@ -808,15 +817,15 @@ fn extract_gpu(
         s.spawn(move || {
             for (i, (_, lo, ds)) in loaded.iter().enumerate() {
                 let Some(ds) = ds else { continue };
-                let b = tile_blend(plan, own, job.coarse, job.unit, *lo, ds);
                 let mut mesh = TileMesh::default();
                 // The host side of the GPU call uses rayon: keep it on our pool.
-                let r = pool
-                    .install(|| g.extract_blend(&b, job.iso as f32, geom, &mut mesh))
-                    .map(|st| {
-                        gpu_totals.add(&st);
-                        mesh
-                    });
+                let r = tile_blend(plan, own, job.coarse, job.unit, *lo, ds).and_then(|b| {
+                    pool.install(|| g.extract_blend(&b, job.iso as f32, geom, &mut mesh))
+                        .map(|st| {
+                            gpu_totals.add(&st);
+                            mesh
+                        })
+                });
                 if tx.send((i, r)).is_err() {
                     break;
                 }

@@ -437,6 +437,10 @@ struct SolveInfo {
     store_points: u64,
     store_cells_crc: Vec<u32>,
     plan: Plan,
+    /// The levels above the finest (the recursive scheme), top last; absent for a
+    /// single-level plan, as in earlier versions' work directories.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    levels: Vec<Plan>,
 }
 
 /// The checkpoint directories of a prepared work directory.
@@ -451,15 +455,17 @@ pub struct WorkDir {
     pub claims: PathBuf,
 }
 
-/// Make `params.work_dir` ready for the solve of `plan` on `store`: record the plan; when the
-/// checkpoints there were made with another plan or store (a resume with another `--mem` or
-/// `--tile`), drop them, as no leaf of theirs fits this plan.
-pub fn prepare(store: &Store, plan: &Plan, params: &ReconParams) -> Result<WorkDir> {
+/// Make `params.work_dir` ready for the solve of `levels` (finest first,
+/// [`crate::recon::plan::levels`]) on `store`: record them; when the checkpoints there were
+/// made with other levels or another store (a resume with another `--mem` or `--tile`), drop
+/// them, as no leaf of theirs fits this plan.
+pub fn prepare(store: &Store, levels: &[Plan], params: &ReconParams) -> Result<WorkDir> {
     let m = &store.manifest;
     let info = SolveInfo {
         store_points: m.point_count,
         store_cells_crc: m.cells.iter().map(|c| c.crc32).collect(),
-        plan: *plan,
+        plan: levels[0],
+        levels: levels[1..].to_vec(),
     };
     let dir = &params.work_dir;
     if !dir.is_dir() {

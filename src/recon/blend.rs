@@ -6,6 +6,7 @@ use std::sync::Arc;
 
 use super::coarse::CoarseField;
 use super::plan::Plan;
+use crate::error::Result;
 use crate::types::{Blend, CellKey, Detail, Leaf};
 
 /// Leaves whose detail support (cell plus overlap) meets fine nodes `lo..=hi`.
@@ -45,10 +46,25 @@ pub fn tile_blend<'a>(
     unit: f32,
     lo: [i64; 3],
     details: &'a [(CellKey, Arc<Detail>)],
-) -> Blend<'a> {
+) -> Result<Blend<'a>> {
     let dims = [(plan.tile + 1) as usize; 3];
-    let (cvals, coarse_dims, axes) = coarse.block(lo, dims, unit);
-    Blend {
+    blend_block(plan, own, coarse, unit, lo, dims, details)
+}
+
+/// [`tile_blend`] for any block of `dims` nodes from fine node `lo` (a level of the recursive
+/// scheme blends the windows the level below reads, [`CoarseField::local`]). Reading the
+/// coarse values of a level above fails only on its leaves' checkpoints.
+pub fn blend_block<'a>(
+    plan: &Plan,
+    own: &[i32],
+    coarse: &CoarseField,
+    unit: f32,
+    lo: [i64; 3],
+    dims: [usize; 3],
+    details: &'a [(CellKey, Arc<Detail>)],
+) -> Result<Blend<'a>> {
+    let (cvals, coarse_dims, axes) = coarse.block(lo, dims, unit)?;
+    Ok(Blend {
         lo,
         dims,
         axes,
@@ -68,5 +84,5 @@ pub fn tile_blend<'a>(
                 shift: d.shift,
             })
             .collect(),
-    }
+    })
 }

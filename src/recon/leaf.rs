@@ -1,7 +1,7 @@
 //! One leaf's solve (step 2 of the two-level scheme): its fine and coarse local solves, their
 //! difference on the cell and its overlap, and the paper's refinement test.
 
-use super::coarse::CoarseField;
+use super::coarse::CoarseGrid;
 use super::fft_solve::{LocalGrid, Solver};
 use super::gpu_solve::{GpuSolveStats, GpuSolver};
 use super::plan::Plan;
@@ -86,7 +86,7 @@ pub fn solve_leaf(
     solvers: &LeafSolvers,
     key: CellKey,
     pts: &LeafPoints,
-    coarse: &CoarseField,
+    coarse: &CoarseGrid,
 ) -> LeafDetail {
     let fine = plan.leaf_fine_grid(key);
     let coarse_local = leaf_coarse_grid(plan, &fine);
@@ -147,7 +147,7 @@ pub fn solve_leaf(
 /// The paper's refinement test against the coarse solution: the mean distance of a 10%
 /// sample of the cell's points (every tenth) to the coarse field's level set through them,
 /// to first order `|F(p) − F̄| / |∇F(p)|`, with `F̄` the mean of `F` over the sample.
-pub fn coarse_error(coarse: &CoarseField, pts: &LeafPoints) -> f64 {
+pub fn coarse_error(coarse: &CoarseGrid, pts: &LeafPoints) -> f64 {
     let own = &pts.pos[..pts.own];
     let sample: Vec<[f64; 3]> = own.iter().step_by(10).copied().collect();
     if sample.is_empty() {
@@ -178,7 +178,7 @@ pub fn coarse_error(coarse: &CoarseField, pts: &LeafPoints) -> f64 {
 }
 
 /// A leaf left to the coarse solution: no detail, its samples' share of the iso-value.
-pub fn coarse_only(pts: &LeafPoints, coarse: &CoarseField) -> LeafDetail {
+pub fn coarse_only(pts: &LeafPoints, coarse: &CoarseGrid) -> LeafDetail {
     LeafDetail {
         detail: None,
         iso_sum: pts.pos[..pts.own].iter().map(|p| coarse.eval(*p)).sum(),

@@ -39,6 +39,23 @@
 //! 4. The iso-value is the mean of the field at the input samples (each leaf sums its own
 //!    cell's samples). With outward normals the field is lower inside.
 //!
+//! **Levels** ([`plan::levels`]). The coarse grid grows as `N/r`: at depth 11 with `r = 4` it
+//! is 520³ nodes, at 13 over 2000³. Rather than growing `r` (and the leaves with it, `E =
+//! 8r`), the scheme recurses: the coarse field of the leaves at depth `D` is the field of
+//! the two-level scheme at depth `D − 2` (its fine spacing is their coarse spacing), whose
+//! own coarse field may again be a level, down to a dense solve of at most 256 cells an
+//! edge. Each level's leaves are solved top down by the same code (step 2 at the level's
+//! depth), and its detail is its fine minus its coarse local solve, so the sum of the dense
+//! solve and every level's blended details telescopes to the finest local solves, as the
+//! two-level sum does. A level is read by the one below as windows: the values on a small
+//! block of its nodes, blended exactly in the run's fixed point from its coarse field and
+//! the checkpoints of its leaves near the block ([`coarse::Level`]); those values are the
+//! coarse nodes of the block below (step 3's trilinear upsampling is unchanged). Every grid
+//! is then at most 264³ (the dense solve) or 64³ (a leaf solve), and leaf cost stays flat per
+//! unit of surface. The sampling density (step 0) and `--trim`'s support are taken at the
+//! dense solve's spacing. The test `levels_of_leaves_match_one_global_solve_and_keep_the_contracts`
+//! holds a level of leaves to the global solve as the two-level oracle does.
+//!
 //! Every solve of the scheme, the coarse global one and both of each leaf, is **screened**
 //! (Kazhdan & Hoppe 2013, [`screen`]) with the weight `--point-weight` relative to its own
 //! grid (by default and under `auto`, one weight per run chosen from the samples' measured
@@ -76,8 +93,8 @@ pub mod plan;
 pub mod pou;
 pub mod screen;
 
-pub use blend::{leaves_near, tile_blend};
-pub use coarse::{CoarseField, Moments};
+pub use blend::{blend_block, leaves_near, tile_blend};
+pub use coarse::{CoarseField, CoarseGrid, Level, Moments};
 pub use global::{GlobalField, global_field};
 pub use leaf::{LeafDetail, LeafPoints, LeafSolvers, coarse_error, coarse_only, solve_leaf};
 pub use plan::{DEFAULT_ERROR, DEFAULT_MIN_POINTS, DEPTHS, Plan, PlanBudget};
@@ -97,7 +114,9 @@ pub struct LeafRule {
 
 /// Solve leaf `key` on its points `pts` when `rule` asks for it (enough samples, and the
 /// coarse solution's surface farther than the tolerance from them, [`coarse_error`]);
-/// otherwise leave it to the coarse solution.
+/// otherwise leave it to the coarse solution. The coarse values around the cell are read
+/// first ([`CoarseField::local`]: in the recursive scheme, a blend of the level above, which
+/// fails only on that level's checkpoints).
 pub fn refine_leaf(
     plan: &Plan,
     unit: f32,
@@ -106,13 +125,16 @@ pub fn refine_leaf(
     pts: &LeafPoints,
     coarse: &CoarseField,
     rule: &LeafRule,
-) -> LeafDetail {
-    let refine = pts.own as u64 >= rule.min_points && coarse_error(coarse, pts) > rule.tolerance;
-    if refine {
-        solve_leaf(plan, unit, solvers, key, pts, coarse)
+) -> crate::error::Result<LeafDetail> {
+    let lo = plan.leaf_node(key);
+    let hi = lo.map(|v| v + plan.leaf_voxels as i64);
+    let coarse = coarse.local(lo, hi)?;
+    let refine = pts.own as u64 >= rule.min_points && coarse_error(&coarse, pts) > rule.tolerance;
+    Ok(if refine {
+        solve_leaf(plan, unit, solvers, key, pts, &coarse)
     } else {
-        coarse_only(pts, coarse)
-    }
+        coarse_only(pts, &coarse)
+    })
 }
 
 /// Step 1's solve: the coarse global solution from the normals splatted on `plan`'s coarse

@@ -69,7 +69,8 @@ pub struct Leaf<'a> {
 /// One block's blended field; see the [module docs](self).
 #[derive(Debug, Clone)]
 pub struct Blend<'a> {
-    /// Global node of the block's node 0 (nodes are non-negative).
+    /// Global node of the block's node 0 (a tile's are non-negative; a window of a level of
+    /// the recursive scheme can start a node or two below the cube).
     pub lo: [i64; 3],
     /// Nodes per axis.
     pub dims: [usize; 3],
@@ -144,7 +145,7 @@ impl Blend<'_> {
         if self
             .lo
             .iter()
-            .any(|&v| !(0..i32::MAX as i64 / 2).contains(&v))
+            .any(|&v| !(-(i32::MAX as i64 / 2)..i32::MAX as i64 / 2).contains(&v))
             || self.dims.contains(&0)
         {
             return Err(format!("block at {:?} of {:?} nodes", self.lo, self.dims));

@@ -1219,8 +1219,20 @@ fn option_cases(c: &mut Corpus) {
         "good.xyz",
         "0 0 0\n1 0 0\n0 1 0\n0 0 1\n".as_bytes(),
     );
-    let cases: [(&str, &str, &[&str], &str); 16] = [
+    let cases: [(&str, &str, &[&str], &str); 18] = [
         ("opt_depth_low", "o.ply", &["--depth", "2"], "--depth 2"),
+        (
+            "opt_coarse_depth_deep",
+            "o.ply",
+            &["--depth", "9", "--coarse-depth", "8"],
+            "--coarse-depth 8: expected 4 to 7",
+        ),
+        (
+            "opt_coarse_depth_shallow",
+            "o.ply",
+            &["--coarse-depth", "3"],
+            "--coarse-depth 3",
+        ),
         ("opt_depth_high", "o.ply", &["--depth", "14"], "--depth 14"),
         (
             "opt_tile_not_pow2",

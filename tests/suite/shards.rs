@@ -105,6 +105,12 @@ fn shards_merge_into_the_single_process_bytes() {
     let opts = ["--depth", "7", "--tile", "16"];
     ok(&recon(&store, &single, &opts));
     assert!(sharded(&store, d.path(), 3, &opts) == std::fs::read(&single).unwrap());
+    // Levels of leaves (the recursive scheme): every shard solves its slice of each level,
+    // and reads the levels above from the shared checkpoints.
+    let opts = ["--depth", "8", "--coarse-depth", "4"];
+    std::fs::remove_file(d.path().join("sharded-3.ply")).unwrap();
+    ok(&recon(&store, &single, &opts));
+    assert!(sharded(&store, d.path(), 3, &opts) == std::fs::read(&single).unwrap());
 }
 
 #[test]

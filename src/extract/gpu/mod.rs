@@ -380,6 +380,13 @@ impl GpuExtractor {
     ) -> Result<GpuStats> {
         blend
             .validate()
+            .and_then(|()| {
+                if blend.lo.iter().any(|&v| v < 0) {
+                    Err("a tile below the cube's first node".to_string())
+                } else {
+                    Ok(())
+                }
+            })
             .map_err(|e| Error::Internal(format!("blended tile at {:?}: {e}", blend.lo)))?;
         let origin = blend.lo.map(|v| v as u64);
         self.extract_from(Source::Blend(blend), blend.dims, origin, iso, geom, out)
