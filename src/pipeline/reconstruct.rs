@@ -305,15 +305,16 @@ pub fn reconstruct(
     let unit = unit_for(field.max_abs());
     // The levels above the finest, from the top down: each is the coarse field of the next,
     // with a cache of its details (a sixteenth of the budget between them).
-    let level_cache = ctx.budget.total() / 16 / levels.len().saturating_sub(1).max(1) as u64;
-    let _level_permit = if levels.len() > 1 {
-        Some(ctx.budget.acquire_now(
-            level_cache * (levels.len() as u64 - 1),
-            "the caches of the upper levels' details",
-        )?)
-    } else {
-        None
-    };
+    let uppers = levels.len() as u64 - 1;
+    let level_cache = ctx.budget.total() / 16 / uppers.max(1);
+    let _level_permit = (uppers > 0)
+        .then(|| {
+            ctx.budget.acquire_now(
+                level_cache * uppers,
+                "the caches of the upper levels' details",
+            )
+        })
+        .transpose()?;
     let mut field = field;
     let mut above = Vec::new();
     for k in (1..levels.len()).rev() {

@@ -264,18 +264,8 @@ impl CoarseField {
                 let c0 = [0, 1, 2].map(|a| ((lo[a] + d.pad[a] * r).div_euclid(r)).clamp(0, n - 1));
                 let c1 =
                     [0, 1, 2].map(|a| ((hi[a] + d.pad[a] * r).div_euclid(r) + 1).clamp(0, n - 1));
-                let mut mn = f32::INFINITY;
-                let mut mx = f32::NEG_INFINITY;
-                for z in c0[2]..=c1[2] {
-                    for y in c0[1]..=c1[1] {
-                        for x in c0[0]..=c1[0] {
-                            let v = d.values[((z * n + y) * n + x) as usize];
-                            mn = mn.min(v);
-                            mx = mx.max(v);
-                        }
-                    }
-                }
-                Ok((mn, mx))
+                let dims = [0, 1, 2].map(|a| (c1[a] - c0[a] + 1) as usize);
+                Ok(min_max(&d.copy(c0, dims)))
             }
             Kind::Level(l) => {
                 let c0 = lo.map(|v| v.div_euclid(r));
@@ -284,14 +274,18 @@ impl CoarseField {
                     return l.coarse.range(c0, c1);
                 }
                 let dims = [0, 1, 2].map(|a| (c1[a] - c0[a] + 1) as usize);
-                let v = l.values(c0, dims)?;
-                Ok(v.iter()
-                    .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &x| {
-                        (a.min(x), b.max(x))
-                    }))
+                Ok(min_max(&l.values(c0, dims)?))
             }
         }
     }
+}
+
+/// The least and the largest of `v`.
+fn min_max(v: &[f32]) -> (f32, f32) {
+    v.iter()
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &x| {
+            (a.min(x), b.max(x))
+        })
 }
 
 /// First and second moments of the input points about an origin, to refuse point sets that

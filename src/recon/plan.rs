@@ -20,7 +20,7 @@ pub const SCREENED_BYTES_PER_NODE: u64 = 28;
 const COARSE_PAD_VOXELS: u64 = 8;
 
 /// The coarse ratio of every level (`r = 4`, leaves of `E = 32` fine voxels).
-const MIN_COARSE_RATIO: u64 = 4;
+const COARSE_RATIO: u64 = 4;
 
 /// Coarse voxels per axis of the largest dense coarse solve: a level whose coarse grid would
 /// be finer (depths above 10) takes the level two octaves up as its coarse field.
@@ -137,19 +137,6 @@ pub struct Plan {
 }
 
 impl Plan {
-    /// Choose grids for `depth` on `cube` within `budget`: the finest level of
-    /// [`levels`].
-    pub fn new(
-        cube: Cube,
-        depth: u32,
-        sigma_vox: f64,
-        point_weight: f64,
-        tile: Option<u64>,
-        budget: PlanBudget,
-    ) -> Result<Plan> {
-        Ok(levels(cube, depth, sigma_vox, point_weight, tile, None, budget)?[0])
-    }
-
     /// The grids of one level at `depth` with coarse ratio `r` (a power of two, at least 4;
     /// the leaf edge `E = 8r` is clamped to the cube).
     pub fn with_ratio(
@@ -215,7 +202,7 @@ impl Plan {
         while d >= MIN_DENSE_DEPTH + LEVEL_STEP {
             d -= LEVEL_STEP;
         }
-        to_total(Plan::needs(d, MIN_COARSE_RATIO, screened))
+        to_total(Plan::needs(d, COARSE_RATIO, screened))
     }
 
     /// Coarse nodes per axis (periodic FFT size).
@@ -338,8 +325,8 @@ pub fn levels(
     let mut out = Vec::new();
     let mut d = depth;
     loop {
-        let p = Plan::with_ratio(cube, d, sigma_vox, point_weight, tile, MIN_COARSE_RATIO);
-        let need = Plan::needs(d, MIN_COARSE_RATIO, screened);
+        let p = Plan::with_ratio(cube, d, sigma_vox, point_weight, tile, COARSE_RATIO);
+        let need = Plan::needs(d, COARSE_RATIO, screened);
         let fits = need.coarse <= budget.coarse && need.leaf <= budget.leaf;
         out.push(p);
         let shallow = coarse_depth.is_none_or(|c| d <= c + LEVEL_STEP);
