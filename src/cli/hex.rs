@@ -29,6 +29,13 @@ pub fn summary(st: &HexStats, output: &Path) -> Result<()> {
         st.extract.vertices,
         st.scale
     );
+    for t in &st.tries {
+        outln!(
+            "edge {:.6} given up, a finer one tried: {}",
+            t.scale,
+            t.error
+        );
+    }
     outln!(
         "singular edges: {v3} of valence 3, {v5} of valence 5, {v6} of valence 2 or 6; {} nodes",
         st.singularities.nodes.len()

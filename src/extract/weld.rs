@@ -8,42 +8,17 @@
 //! caller, who knows the tiling) is `≤ t` is forgotten. Memory is then proportional to the
 //! seams between done and pending tiles, not to the mesh.
 
-use std::collections::{BTreeMap, HashMap};
-use std::hash::{BuildHasherDefault, Hasher};
+use std::collections::BTreeMap;
 
 use crate::error::{Error, Result};
-use crate::types::{EdgeKey, TileMesh};
-
-/// A hasher for [`EdgeKey`]s: the splitmix64 finaliser of the key, cheap and well mixed in
-/// every bit (keys of a seam share their low bits when the grid size is a power of two).
-#[derive(Default)]
-struct KeyHasher(u64);
-
-impl Hasher for KeyHasher {
-    fn write(&mut self, bytes: &[u8]) {
-        for &b in bytes {
-            self.0 = self.0.rotate_left(8) ^ b as u64;
-        }
-    }
-
-    fn write_u64(&mut self, v: u64) {
-        self.0 = v;
-    }
-
-    fn finish(&self) -> u64 {
-        let mut z = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    }
-}
+use crate::types::{EdgeKey, KeyMap, TileMesh};
 
 /// Assigns global vertex indices to edge keys across tiles processed in a fixed order; keeps
 /// only keys that a later tile may still reference (the frontier).
 #[derive(Debug, Default)]
 pub struct Welder {
     /// Global index of each frontier key.
-    frontier: HashMap<EdgeKey, u64, BuildHasherDefault<KeyHasher>>,
+    frontier: KeyMap<EdgeKey, u64>,
     /// Frontier keys by the tile after which they are released.
     expiry: BTreeMap<u64, Vec<EdgeKey>>,
     /// Scratch: global index of each vertex of the tile being added.
@@ -185,6 +160,8 @@ impl Welder {
 mod tests {
     use super::super::cpu::McWorkspace;
     use super::super::cpu::tests::{canonical, check_closed_oriented, key_triangles};
+    use std::collections::HashMap;
+
     use super::*;
     use crate::types::GridGeom;
 

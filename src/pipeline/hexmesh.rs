@@ -6,6 +6,19 @@
 //! Every failure names the input file and the element: the tetrahedron that is inverted or
 //! not manifold, the singular edge whose holonomy no hex mesh has, the rounding that made
 //! tetrahedra flip in parameter space, the hexahedra that came out inverted.
+//!
+//! **Scale.** The hex edge without `--scale` is a twentieth of the bounding box's diagonal, a
+//! guess that knows nothing of the shape's features. Where the rounding cannot resolve one
+//! (two charts that meet at a corner rounded a hex apart, say), it flips tetrahedra or
+//! leaves a corner folded that no vertex placement undoes, and a slightly finer edge rounds
+//! differently. So without `--scale` the run tries the default edge and then up to
+//! [`SCALE_TRIES`]` − 1` edges each [`SCALE_STEP`] of the last, from the parameterisation
+//! on (the tetrahedra and the frame field are kept), and writes the first mesh with no
+//! inverted hexahedron; each edge given up is logged and listed in the report's `tries`.
+//! A field that flips tetrahedra before any rounding does so at every edge and is not
+//! retried. The fandisk at its default edge 2.18 folds two hexahedra at a corner; at 1.85,
+//! the next edge, none (measured; 2.0 and 1.4 fold, 1.5 to 1.85 do not: the rounding, not
+//! the edge's size, decides). An explicit `--scale` is tried alone.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -14,11 +27,11 @@ use crate::error::{Error, Result};
 use crate::exec::Ctx;
 use crate::hex::extract::{ExtractReport, extract};
 use crate::hex::frames::{self, Singularities};
-use crate::hex::mesh::{HexMesh, TetMesh};
+use crate::hex::mesh::{Frame, HexMesh, TetMesh};
 use crate::hex::param::{Field, ParamParams, ParamReport, parameterise_with};
 use crate::hex::pillow::{PillowReport, pillow};
-use crate::hex::polycube::{PolycubeParams, PolycubeReport, polycube_frames};
-use crate::hex::quality::{MeshQuality, hex_qualities, summarise};
+use crate::hex::polycube::{Polycube, PolycubeParams, PolycubeReport, polycube_frames};
+use crate::hex::quality::{HexQuality, MeshQuality, hex_qualities, summarise};
 use crate::hex::relax::{RelaxParams, RelaxReport, relax};
 use crate::hex::rotation::Rot;
 use crate::hex::smooth_frames::{SmoothParams, SmoothReport, smooth_frames};
@@ -74,6 +87,8 @@ pub struct HexStats {
     pub tets: usize,
     /// Target hex edge used.
     pub scale: f64,
+    /// Default edges tried before `scale` and given up (module docs, "Scale").
+    pub tries: Vec<ScaleTry>,
     /// The stuffing of a surface input.
     pub stuffing: Option<StuffingReport>,
     /// The smooth field's figures, when it was made.
@@ -99,7 +114,8 @@ pub struct HexStats {
     pub relax: Option<RelaxReport>,
     /// The written mesh's quality.
     pub quality: MeshQuality,
-    /// Seconds per step: read and check, frames, parameterisation, extraction, relaxation.
+    /// Seconds per step: read and check, frames, parameterisation, extraction, relaxation
+    /// (the last three summed over the edges tried).
     pub seconds: [f64; 5],
 }
 
@@ -197,8 +213,10 @@ pub struct HexFailure {
     pub error: String,
     /// Tetrahedra meshed (after any stuffing and splitting).
     pub tets: usize,
-    /// Target hex edge used.
+    /// Target hex edge of the last try.
     pub scale: f64,
+    /// Default edges tried before it and given up.
+    pub tries: Vec<ScaleTry>,
     /// The stuffing of a surface input.
     pub stuffing: Option<StuffingReport>,
     /// The smooth field's figures.
@@ -257,7 +275,6 @@ fn run(job: &HexJob, ctx: &Ctx, failure: &mut HexFailure) -> Result<HexStats> {
     failure.chords_split = chords_split;
 
     let clock = Instant::now();
-    let polycube_run = job.frames == FrameChoice::Polycube;
     let (field, smooth, polycube) = match &job.frames {
         FrameChoice::Constant => (frames::constant_frames(mesh.tets.len()), None, None),
         FrameChoice::Smooth => {
@@ -302,37 +319,176 @@ fn run(job: &HexJob, ctx: &Ctx, failure: &mut HexFailure) -> Result<HexStats> {
         ));
     }
 
+    let prepared = Prepared {
+        mesh: &mesh,
+        topo: &topo,
+        field: &field,
+        matchings: &m,
+        singular: &sing,
+        polycube: polycube.as_ref(),
+    };
+    // The default edge is a guess from the bounding box: where its rounding cannot resolve a
+    // feature, a finer one may (module docs, "Scale").
+    let scales: Vec<f64> = match job.scale {
+        Some(s) => vec![s],
+        None => (0..SCALE_TRIES)
+            .map(|i| scale * SCALE_STEP.powi(i as i32))
+            .collect(),
+    };
+    let mut tries = Vec::new();
+    for (i, &s) in scales.iter().enumerate() {
+        let last = i + 1 == scales.len();
+        failure.scale = s;
+        let meshed = match mesh_at(job, ctx, &prepared, s, last, &mut seconds, failure) {
+            Ok(m) => m,
+            Err(f) if f.retry && !last => {
+                let next = scales[i + 1];
+                log::warn!(
+                    "{}: at {} {s:.6}: {}; trying {next:.6}",
+                    path.display(),
+                    if i == 0 { "the default edge" } else { "edge" },
+                    f.reason
+                );
+                tries.push(ScaleTry {
+                    scale: s,
+                    error: f.reason,
+                });
+                failure.tries = tries.clone();
+                continue;
+            }
+            Err(f) => {
+                let tried = if tries.is_empty() {
+                    String::new()
+                } else {
+                    let list: Vec<String> =
+                        tries.iter().map(|t| format!("{:.6}", t.scale)).collect();
+                    format!(
+                        " (at edge {s:.6}, after {} failed too: see the report's tries)",
+                        list.join(", ")
+                    )
+                };
+                return Err(Error::input(path, format!("{}{tried}", f.reason)));
+            }
+        };
+        let sj: Vec<f64> = meshed
+            .per_hex
+            .iter()
+            .map(|q| q.min_scaled_jacobian)
+            .collect();
+        crate::io::volume::write_hex(&job.output, &meshed.hexes, &[("scaled_jacobian", &sj)])?;
+        return Ok(HexStats {
+            tets: mesh.tets.len(),
+            scale: s,
+            tries,
+            stuffing,
+            smooth,
+            polycube: polycube.map(|p| p.report),
+            chords_split,
+            targets: meshed.targets,
+            singular_by_valence: sing.by_valence(),
+            singularities: sing,
+            param: meshed.param,
+            extract: meshed.extract,
+            pillow: meshed.pillow,
+            relax: meshed.relax,
+            quality: meshed.quality,
+            seconds,
+        });
+    }
+    unreachable!("at least one scale is tried")
+}
+
+/// Default edges tried when `--scale` is not given: the first, then each this much finer.
+pub const SCALE_STEP: f64 = 0.85;
+
+/// Most default edges tried (module docs, "Scale").
+pub const SCALE_TRIES: usize = 4;
+
+/// A default edge given up, and why.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct ScaleTry {
+    /// The hex edge tried.
+    pub scale: f64,
+    /// What failed, as the error would have said.
+    pub error: String,
+}
+
+/// What the meshing at every scale shares: the checked tetrahedra and the frame field.
+struct Prepared<'a> {
+    mesh: &'a TetMesh,
+    topo: &'a Topology,
+    field: &'a [Frame],
+    matchings: &'a [[Rot; 4]],
+    singular: &'a Singularities,
+    polycube: Option<&'a Polycube>,
+}
+
+/// The hexahedra of one scale, and what made them.
+struct Meshed {
+    hexes: HexMesh,
+    per_hex: Vec<HexQuality>,
+    quality: MeshQuality,
+    targets: &'static str,
+    param: ParamReport,
+    extract: ExtractReport,
+    pillow: Option<PillowReport>,
+    relax: Option<RelaxReport>,
+}
+
+/// Why one scale gave no hexahedra to write, and whether a finer edge may: the rounding
+/// flipped tetrahedra, no hexahedron fits, or some came out inverted. A field that flips
+/// tetrahedra before any rounding does so at every scale.
+struct Failed {
+    reason: String,
+    retry: bool,
+}
+
+/// Parameterise at hex edge `scale`, extract, pillow, relax and measure. Inverted hexahedra
+/// are a failure unless `--keep-inverted` and this is the `last` scale tried.
+fn mesh_at(
+    job: &HexJob,
+    ctx: &Ctx,
+    p: &Prepared,
+    scale: f64,
+    last: bool,
+    seconds: &mut [f64; 5],
+    failure: &mut HexFailure,
+) -> std::result::Result<Meshed, Failed> {
+    let fatal = |e: String| Failed {
+        reason: e,
+        retry: false,
+    };
     let clock = Instant::now();
     let params = ParamParams {
         scale,
         ..ParamParams::default()
     };
     let mut input = Field {
-        frames: &field,
-        targets: &field,
-        axes: polycube.as_ref().map(|p| p.axes.as_slice()),
-        matchings: &m,
-        singular: &sing.edges,
+        frames: p.field,
+        targets: p.field,
+        axes: p.polycube.map(|c| c.axes.as_slice()),
+        matchings: p.matchings,
+        singular: &p.singular.edges,
     };
     let mut targets = "frames";
-    let (mut map, mut param) = parameterise_with(&mesh, &topo, &input, &params)
-        .map_err(|e| Error::input(path, e.to_string()))?;
+    let (mut map, mut param) =
+        parameterise_with(p.mesh, p.topo, &input, &params).map_err(|e| fatal(e.to_string()))?;
     if param.flipped_final > 0
-        && let Some(p) = &polycube
+        && let Some(c) = p.polycube
     {
-        input.targets = &p.gradients;
-        let (map2, param2) = parameterise_with(&mesh, &topo, &input, &params)
-            .map_err(|e| Error::input(path, e.to_string()))?;
+        input.targets = &c.gradients;
+        let (map2, param2) =
+            parameterise_with(p.mesh, p.topo, &input, &params).map_err(|e| fatal(e.to_string()))?;
         if param2.flipped_final < param.flipped_final {
             (map, param, targets) = (map2, param2, "deformation");
         }
     }
-    seconds[2] = clock.elapsed().as_secs_f64();
+    seconds[2] += clock.elapsed().as_secs_f64();
     failure.param = Some(param.clone());
-    failure.seconds = seconds;
+    failure.seconds = *seconds;
     if param.flipped_final > 0 {
         let cause = match &param.first_flip {
-            Some(c) => format!(
+            Some(c) if param.flipped_continuous == 0 => format!(
                 "; the first flips came with rounding round {} ({}), tetrahedra {:?}",
                 c.round,
                 c.fixed
@@ -342,38 +498,42 @@ fn run(job: &HexJob, ctx: &Ctx, failure: &mut HexFailure) -> Result<HexStats> {
                     .join(", "),
                 c.tets
             ),
-            None => format!(
+            _ => format!(
                 "; {} were flipped before any rounding: the frame field does not fit the shape at scale {scale}",
                 param.flipped_continuous
             ),
         };
-        return Err(Error::input(
-            path,
-            format!(
+        return Err(Failed {
+            reason: format!(
                 "the parameterisation flips {} of {} tetrahedra, so no valid hexahedra can be extracted{cause}; try a larger --scale or other --frames",
                 param.flipped_final,
-                mesh.tets.len()
+                p.mesh.tets.len()
             ),
-        ));
+            // Flips before any rounding are the field's, at every edge.
+            retry: param.flipped_continuous == 0,
+        });
     }
 
     let clock = Instant::now();
-    let (mut hexes, ext) = extract(&mesh, &map).map_err(|e| Error::input(path, e.to_string()))?;
-    seconds[3] = clock.elapsed().as_secs_f64();
+    let (mut hexes, ext) = extract(p.mesh, &map).map_err(|e| fatal(e.to_string()))?;
+    seconds[3] += clock.elapsed().as_secs_f64();
     if hexes.hexes.is_empty() {
-        return Err(Error::input(
-            path,
-            format!("no hexahedron fits inside at --scale {scale}: choose a smaller --scale"),
-        ));
+        return Err(Failed {
+            reason: format!(
+                "no hexahedron fits inside at --scale {scale}: choose a smaller --scale"
+            ),
+            retry: true,
+        });
     }
 
     let clock = Instant::now();
+    let polycube_run = job.frames == FrameChoice::Polycube;
     let pillowed = job
         .pillow
-        .unwrap_or(job.frames == FrameChoice::Polycube)
+        .unwrap_or(polycube_run)
         .then(|| pillow(&mut hexes));
     let relaxed = job.relax.then(|| {
-        let tris = topo.boundary_triangles(&mesh);
+        let tris = p.topo.boundary_triangles(p.mesh);
         // A polycube map's corners and edges lie where the solid is smooth: the boundary
         // quadrilaterals bend there without a feature of the solid, so only a much sharper
         // bend holds a vertex.
@@ -382,17 +542,17 @@ fn run(job: &HexJob, ctx: &Ctx, failure: &mut HexFailure) -> Result<HexStats> {
             ..RelaxParams::default()
         };
         ctx.pool
-            .install(|| relax(&mut hexes, &mesh.verts, &tris, &params))
+            .install(|| relax(&mut hexes, &p.mesh.verts, &tris, &params))
     });
-    seconds[4] = clock.elapsed().as_secs_f64();
+    seconds[4] += clock.elapsed().as_secs_f64();
 
     let per_hex = ctx.pool.install(|| hex_qualities(&hexes));
     let quality = summarise(&per_hex);
     failure.quality = Some(quality.clone());
     failure.pillow = pillowed.clone();
     failure.relax = relaxed.clone();
-    failure.seconds = seconds;
-    if quality.inverted > 0 && !job.keep_inverted {
+    failure.seconds = *seconds;
+    if quality.inverted > 0 && !(job.keep_inverted && last) {
         let worst: Vec<String> = quality
             .worst_hexes
             .iter()
@@ -410,33 +570,24 @@ fn run(job: &HexJob, ctx: &Ctx, failure: &mut HexFailure) -> Result<HexStats> {
                     b / 8
                 )
             });
-        return Err(Error::input(
-            path,
-            format!(
+        return Err(Failed {
+            reason: format!(
                 "{} of {} hexahedra are inverted (scaled Jacobian ≤ 0), worst: {}{folded}; nothing written (--keep-inverted writes them anyway)",
                 quality.inverted,
                 quality.hexes,
                 worst.join(", ")
             ),
-        ));
+            retry: true,
+        });
     }
-    let sj: Vec<f64> = per_hex.iter().map(|q| q.min_scaled_jacobian).collect();
-    crate::io::volume::write_hex(&job.output, &hexes, &[("scaled_jacobian", &sj)])?;
-    Ok(HexStats {
-        tets: mesh.tets.len(),
-        scale,
-        stuffing,
-        smooth,
-        polycube: polycube.map(|p| p.report),
-        chords_split,
+    Ok(Meshed {
+        hexes,
+        per_hex,
+        quality,
         targets,
-        singular_by_valence: sing.by_valence(),
-        singularities: sing,
         param,
         extract: ext,
         pillow: pillowed,
         relax: relaxed,
-        quality,
-        seconds,
     })
 }

@@ -74,11 +74,9 @@
 //! solves, and any thread count, tile size or shard, share it. Where nothing could be
 //! measured (sparse samples) α = 4.
 
-use std::collections::HashMap;
-
 use super::fft_solve::LocalGrid;
 use crate::geom::{dot, plane_basis};
-use crate::types::floor;
+use crate::types::{KeyMap, floor};
 
 /// The screening weight for samples of no known noise: PoissonRecon's default `--pointWeight`.
 pub const BASE_POINT_WEIGHT: f64 = 4.0;
@@ -421,7 +419,7 @@ pub struct ScreenBuilder {
     grid: LocalGrid,
     /// Per wrapped voxel (`(z·n + y)·n + x`): the sum of the samples' offsets in the voxel
     /// (in voxels) and their count.
-    voxels: HashMap<u64, ([f64; 3], u64)>,
+    voxels: KeyMap<u64, ([f64; 3], u64)>,
 }
 
 impl ScreenBuilder {
@@ -429,7 +427,7 @@ impl ScreenBuilder {
     pub fn new(grid: &LocalGrid) -> ScreenBuilder {
         ScreenBuilder {
             grid: *grid,
-            voxels: HashMap::new(),
+            voxels: KeyMap::default(),
         }
     }
 

@@ -20,7 +20,7 @@ pub mod spline;
 
 pub use field::{Axis, Blend, Detail, FIELD_LIMIT, Leaf, MAX_SHIFT, VALUE_LIMIT, WEIGHT_BITS};
 pub use geom::{Aabb, Cube, Rigid, floor, round_index};
-pub use keys::{CellKey, EdgeKey, MAX_LEVEL, demorton3, morton3};
+pub use keys::{CellKey, EdgeKey, KeyHasher, KeyMap, MAX_LEVEL, demorton3, morton3};
 pub use mesh::{FLOAT32_SPACING, GridGeom, TileMesh};
 pub use points::{Attributes, PointBatch, Viewpoint};
 pub use spline::TensorSurface;

@@ -225,8 +225,8 @@ fn a_field_no_hex_mesh_has_is_reported_not_passed_on() {
 
 #[test]
 fn the_fandisk_becomes_hexes_with_none_inverted() {
-    // The fandisk (59K tetrahedra, sharp edges and a curved fan): its rounded polycube map
-    // inverts a few dozen tetrahedra, which the untangling turns back without moving an
+    // The fandisk (59K tetrahedra, sharp edges and a curved fan), at the default edge: its
+    // rounded polycube map inverts a few dozen tetrahedra, which the untangling turns back without moving an
     // integer; the pillowed and relaxed hexahedra that still fold are untangled too. All
     // hexahedra come out positive, read back by meshio, and the boundary lies on the input's.
     let Some(fan) = shared("tetmesh/fandisk.mesh") else {
@@ -234,6 +234,7 @@ fn the_fandisk_becomes_hexes_with_none_inverted() {
     };
     let d = tempfile::tempdir().unwrap();
     let out = d.path().join("fan.vtk");
+    let out2 = d.path().join("fan2.vtk");
     let rep = d.path().join("fan.json");
     ok(&[
         "hexmesh",
@@ -242,8 +243,6 @@ fn the_fandisk_becomes_hexes_with_none_inverted() {
         s(&out),
         "--frames",
         "polycube",
-        "--scale",
-        "1.5",
         "--report",
         s(&rep),
         "--progress",
@@ -251,6 +250,23 @@ fn the_fandisk_becomes_hexes_with_none_inverted() {
     ]);
     let r: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&rep).unwrap()).unwrap();
+    // The default edge (a twentieth of the diagonal, 2.18) folds two hexahedra at a corner;
+    // the next, 0.85 of it, does not.
+    let tries = r["tries"].as_array().unwrap();
+    assert_eq!(tries.len(), 1, "{r}");
+    assert!(
+        (tries[0]["scale"].as_f64().unwrap() - 43.563 / 20.0).abs() < 1e-2,
+        "{r}"
+    );
+    assert!(
+        tries[0]["error"].as_str().unwrap().contains("folded"),
+        "{r}"
+    );
+    let scale = r["scale"].as_f64().unwrap();
+    assert!(
+        (scale - 0.85 * tries[0]["scale"].as_f64().unwrap()).abs() < 1e-9,
+        "{r}"
+    );
     let u = &r["param"]["untangle"];
     assert!(u["inverted_before"].as_u64().unwrap() > 0, "{r}");
     assert_eq!(u["inverted_after"].as_u64(), Some(0), "{r}");
@@ -262,10 +278,31 @@ fn the_fandisk_becomes_hexes_with_none_inverted() {
     };
     assert_eq!(c["scaled_jacobian"]["count_le_0"].as_u64(), Some(0), "{c}");
     assert_eq!(c["boundary"]["closed"].as_bool(), Some(true), "{c}");
-    // The fandisk's diagonal is 43.6: on average within 0.5% of it, at most 2 hex edges
-    // (where the hexes' faces cut its sharp edges).
-    assert!(c["reference"]["mean"].as_f64().unwrap() < 0.22, "{c}");
-    assert!(c["reference"]["max"].as_f64().unwrap() < 3.0, "{c}");
+    // The fandisk's diagonal is 43.6: on average within 0.6% of it (0.21 measured), at most
+    // 3 hex edges (4.8, 2.6 edges, measured: where the hexes' faces cut its sharp edges).
+    assert!(c["reference"]["mean"].as_f64().unwrap() < 0.25, "{c}");
+    assert!(c["reference"]["max"].as_f64().unwrap() < 3.0 * scale, "{c}");
+
+    // An explicit edge is tried alone: at 2.0 the same corner folds, and the run says so.
+    let e = fails(&[
+        "hexmesh",
+        s(&fan),
+        "-o",
+        s(&out2),
+        "--scale",
+        "2.0",
+        "--report",
+        s(&rep),
+        "--progress",
+        "none",
+    ]);
+    assert!(e.contains("fandisk.mesh") && e.contains("folded"), "{e}");
+    assert!(!e.contains("failed too"), "{e}");
+    assert!(!out2.exists());
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&rep).unwrap()).unwrap();
+    assert_eq!(r["tries"].as_array().map(Vec::len), Some(0), "{r}");
+    assert_eq!(r["scale"].as_f64(), Some(2.0), "{r}");
 }
 
 /// Axis-aligned boxes (min, max corners) as one ASCII PLY of 12 outward triangles each.
