@@ -26,7 +26,7 @@ use crate::recon::pou::unit_for;
 use crate::recon::{
     CoarseField, DEFAULT_ERROR, DEFAULT_MIN_POINTS, LeafDetail, LeafRule, LeafSolvers, Level,
     Moments, Plan, PlanBudget, PointWeight, fft_solve, refine_leaf,
-    screen::{NOISE_KEY_BYTES, NoiseStats, ScreenBuilder},
+    screen::{self, NOISE_KEY_BYTES, NoiseStats, ScreenBuilder},
     solve_coarse,
 };
 use crate::store::Store;
@@ -627,6 +627,7 @@ fn coarse_pass(
     let mut screen = ScreenBuilder::new(&cgrid);
     let mut screen_permit: Option<Permit> = None;
     let wave = 2 * ctx.threads();
+    let jet_stride = screen::jet_stride(m.point_count);
     let ncells = m.cells.len();
     let mut i = 0;
     while i < ncells {
@@ -643,7 +644,13 @@ fn coarse_pass(
             ids.par_iter()
                 .map(|&j| {
                     let mut b = store.read_cell(j)?;
-                    let st = NoiseStats::of(&b.pos, &b.normal, fine.cube.origin, fine.spacing);
+                    let st = NoiseStats::of(
+                        &b.pos,
+                        &b.normal,
+                        fine.cube.origin,
+                        fine.spacing,
+                        jet_stride,
+                    );
                     weigh_normals(&mut b, plan.confidence, &density);
                     Ok((b, st))
                 })

@@ -211,10 +211,26 @@ pub const JET_RADII_VOXELS: [f64; 2] = [1.5, 3.0];
 pub const JET_HEIGHT_VOXELS: f64 = 6.0;
 
 /// A jet fit is centred on every this many occupied fine voxels of a batch (a store cell), in
-/// key order, or on more where that would leave the batch under [`JET_MIN_FITS`] fits. Its
-/// cost (perf, a 10M-point sphere with noise of 1.6 voxels at depth 10, 2 cores): all of
-/// [`NoiseStats::of`], the sort and the fits, is under 1 CPU-second, about 1% of the run.
+/// key order, or on more where that would leave the batch under [`JET_MIN_FITS`] fits; in a
+/// run of more than [`JET_FULL_RATE_POINTS`] points, on proportionally fewer
+/// ([`jet_stride`]). Its cost (perf, a 10M-point sphere with noise of 1.6 voxels at depth 10,
+/// 2 cores): all of [`NoiseStats::of`], the sort and the fits, is under 1 CPU-second, about
+/// 1% of the run.
 pub const JET_VOXELS_PER_FIT: usize = 64;
+
+/// Up to this many points a run fits a jet every [`JET_VOXELS_PER_FIT`] voxels. Beyond, the
+/// fits would grow with the points (and each with the samples on its disc) while the pooled
+/// residual, of tens of thousands of fits, is long since precise: a 100M-point sphere at
+/// depth 11 spent 60% of its coarse pass, some 17 s on 2 cores, in 190,000 jet fits.
+pub const JET_FULL_RATE_POINTS: u64 = 10_000_000;
+
+/// The most voxels between jet fits in a run of `points` samples: [`JET_VOXELS_PER_FIT`],
+/// times the number of [`JET_FULL_RATE_POINTS`] the run holds (rounded up), so the fits stop
+/// growing past that many points. A function of the run alone (its point count), so every
+/// thread count, shard and resume reads the same statistics.
+pub fn jet_stride(points: u64) -> usize {
+    JET_VOXELS_PER_FIT * points.div_ceil(JET_FULL_RATE_POINTS).max(1) as usize
+}
 
 /// Fewest samples a jet fit takes (six unknowns).
 pub const JET_MIN_SAMPLES: u64 = 16;
@@ -222,8 +238,15 @@ pub const JET_MIN_SAMPLES: u64 = 16;
 impl NoiseStats {
     /// The statistics of one batch of samples (`pos`, unit normals `nrm`) on the fine voxels
     /// of spacing `h` from `origin`. Voxels are visited in key order and samples in input
-    /// order, so the sums depend only on the batch.
-    pub fn of(pos: &[[f64; 3]], nrm: &[[f32; 3]], origin: [f64; 3], h: f64) -> NoiseStats {
+    /// order, so the sums depend only on the batch. Jet fits are at most `max_stride` voxels
+    /// apart ([`jet_stride`]).
+    pub fn of(
+        pos: &[[f64; 3]],
+        nrm: &[[f32; 3]],
+        origin: [f64; 3],
+        h: f64,
+        max_stride: usize,
+    ) -> NoiseStats {
         let mut keys: Vec<(u64, u32)> = pos
             .iter()
             .enumerate()
@@ -248,12 +271,12 @@ impl NoiseStats {
             }
             st.dof += run.len() as u64 - 1;
         }
-        st.add_jets(pos, nrm, &keys, origin, h);
+        st.add_jets(pos, nrm, &keys, origin, h, max_stride);
         st
     }
 
     /// The jet fits of [`NoiseStats::of`] over a batch whose `(key, index)` pairs `keys`
-    /// are sorted: centred on voxels at an even stride ([`JET_VOXELS_PER_FIT`]), each fit in
+    /// are sorted: centred on voxels at an even stride (at most `max_stride`), each fit in
     /// the frame of its centre voxel's mean sample and normal, on both discs.
     fn add_jets(
         &mut self,
@@ -262,10 +285,11 @@ impl NoiseStats {
         keys: &[(u64, u32)],
         origin: [f64; 3],
         h: f64,
+        max_stride: usize,
     ) {
         // Counted first, so that the pass holds nothing beyond the keys.
         let voxels = keys.chunk_by(|a, b| a.0 == b.0).count();
-        let stride = (voxels / JET_MIN_FITS as usize).clamp(1, JET_VOXELS_PER_FIT);
+        let stride = (voxels / JET_MIN_FITS as usize).clamp(1, max_stride.max(1));
         for run in keys.chunk_by(|a, b| a.0 == b.0).step_by(stride) {
             let Some((c, n, len)) = voxel_mean(run, pos, nrm) else {
                 continue;
@@ -654,7 +678,7 @@ mod tests {
                 pos.push([x, y, 0.5 + (0.5 + s * g) * h]);
             }
             let nrm = vec![[0.0, 0.0, 1.0]; pos.len()];
-            let st = NoiseStats::of(&pos, &nrm, [0.0; 3], h);
+            let st = NoiseStats::of(&pos, &nrm, [0.0; 3], h, JET_VOXELS_PER_FIT);
             let got = st.sigma_voxels().unwrap();
             assert!((got - s).abs() <= 0.1 * s + 1e-9, "{s}: {got}");
             // The weight: 4 for noise at the reference, up to 32 for precise samples.
@@ -693,13 +717,33 @@ mod tests {
         let h = 0.01;
         for (seed, s) in [(1, 0.0), (2, 0.5), (3, 1.0), (4, 1.6)] {
             let (pos, nrm) = noisy_plane(20_000, s, h, seed);
-            let st = NoiseStats::of(&pos, &nrm, [0.0; 3], h);
+            let st = NoiseStats::of(&pos, &nrm, [0.0; 3], h, JET_VOXELS_PER_FIT);
             let jet = st.jet_sigma_voxels().unwrap();
             assert!((jet - s).abs() <= 0.1 * s + 1e-9, "{s}: {jet}");
             if s >= 1.0 {
                 assert!(st.sigma_voxels().unwrap() < 0.3, "{s}: {st:?}");
             }
             assert!(st.jets[0].fits >= JET_MIN_FITS, "{st:?}");
+        }
+    }
+
+    #[test]
+    fn past_ten_million_points_fewer_jets_read_the_same_noise() {
+        assert_eq!(jet_stride(0), JET_VOXELS_PER_FIT);
+        assert_eq!(jet_stride(JET_FULL_RATE_POINTS), JET_VOXELS_PER_FIT);
+        assert_eq!(jet_stride(JET_FULL_RATE_POINTS + 1), 2 * JET_VOXELS_PER_FIT);
+        assert_eq!(jet_stride(100_000_000), 10 * JET_VOXELS_PER_FIT);
+        // 250K samples on 62,500 voxels of a plane (4 a voxel), noise of one voxel: a run of
+        // 100M points fits a tenth of the jets on it and reads the same spread.
+        let h = 0.002;
+        let (pos, nrm) = noisy_plane(250_000, 1.0, h, 5);
+        let full = NoiseStats::of(&pos, &nrm, [0.0; 3], h, jet_stride(1_000_000));
+        let thin = NoiseStats::of(&pos, &nrm, [0.0; 3], h, jet_stride(100_000_000));
+        let (a, b) = (full.jets[0].fits, thin.jets[0].fits);
+        assert!(a >= 9 * b && b >= JET_MIN_FITS, "{a} {b}");
+        for st in [&full, &thin] {
+            let jet = st.jet_sigma_voxels().unwrap();
+            assert!((jet - 1.0).abs() <= 0.1, "{jet}: {st:?}");
         }
     }
 
@@ -720,7 +764,7 @@ mod tests {
             pos.push([0, 1, 2].map(|a| 0.5 + r * n[a]));
             nrm.push(n.map(|x| x as f32));
         }
-        let st = NoiseStats::of(&pos, &nrm, [0.0; 3], h);
+        let st = NoiseStats::of(&pos, &nrm, [0.0; 3], h, JET_VOXELS_PER_FIT);
         assert!(st.jet_sigma_voxels().unwrap() < 0.01, "{st:?}");
     }
 
@@ -758,11 +802,23 @@ mod tests {
     #[test]
     fn noise_stats_need_two_samples_in_a_voxel() {
         let pos = [[0.05, 0.05, 0.05], [0.15, 0.05, 0.05]];
-        let st = NoiseStats::of(&pos, &[[0.0, 0.0, 1.0]; 2], [0.0; 3], 0.1);
+        let st = NoiseStats::of(
+            &pos,
+            &[[0.0, 0.0, 1.0]; 2],
+            [0.0; 3],
+            0.1,
+            JET_VOXELS_PER_FIT,
+        );
         assert_eq!(st.sigma_voxels(), None);
         // Opposite normals in one voxel: a thin sheet, not noise.
         let pos = [[0.05, 0.05, 0.04], [0.05, 0.05, 0.06]];
-        let st = NoiseStats::of(&pos, &[[0.0, 0.0, 1.0], [0.0, 0.0, -1.0]], [0.0; 3], 0.1);
+        let st = NoiseStats::of(
+            &pos,
+            &[[0.0, 0.0, 1.0], [0.0, 0.0, -1.0]],
+            [0.0; 3],
+            0.1,
+            JET_VOXELS_PER_FIT,
+        );
         assert_eq!(st.sigma_voxels(), None);
     }
 
