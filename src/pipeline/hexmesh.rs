@@ -335,7 +335,8 @@ fn run(job: &HexJob, ctx: &Ctx, failure: &mut HexFailure) -> Result<HexStats> {
             .map(|i| scale * SCALE_STEP.powi(i as i32))
             .collect(),
     };
-    let mut tries = Vec::new();
+    // The edges given up, kept in the failure report (and moved into the stats on success).
+    failure.tries.clear();
     for (i, &s) in scales.iter().enumerate() {
         let last = i + 1 == scales.len();
         failure.scale = s;
@@ -349,19 +350,21 @@ fn run(job: &HexJob, ctx: &Ctx, failure: &mut HexFailure) -> Result<HexStats> {
                     if i == 0 { "the default edge" } else { "edge" },
                     f.reason
                 );
-                tries.push(ScaleTry {
+                failure.tries.push(ScaleTry {
                     scale: s,
                     error: f.reason,
                 });
-                failure.tries = tries.clone();
                 continue;
             }
             Err(f) => {
-                let tried = if tries.is_empty() {
+                let tried = if failure.tries.is_empty() {
                     String::new()
                 } else {
-                    let list: Vec<String> =
-                        tries.iter().map(|t| format!("{:.6}", t.scale)).collect();
+                    let list: Vec<String> = failure
+                        .tries
+                        .iter()
+                        .map(|t| format!("{:.6}", t.scale))
+                        .collect();
                     format!(
                         " (at edge {s:.6}, after {} failed too: see the report's tries)",
                         list.join(", ")
@@ -379,7 +382,7 @@ fn run(job: &HexJob, ctx: &Ctx, failure: &mut HexFailure) -> Result<HexStats> {
         return Ok(HexStats {
             tets: mesh.tets.len(),
             scale: s,
-            tries,
+            tries: std::mem::take(&mut failure.tries),
             stuffing,
             smooth,
             polycube: polycube.map(|p| p.report),

@@ -111,9 +111,10 @@ pub struct EdgeKey(pub u64);
 
 /// A hasher for integer keys ([`EdgeKey`]s, voxel indices): the splitmix64 finaliser of the
 /// key, cheap and well mixed in every bit (keys of a seam share their low bits when the grid
-/// size is a power of two). The standard library's default (SipHash, built against hash
-/// flooding, which keys computed from geometry cannot mount) was a tenth of a leaf solve's
-/// time in the screening's per-voxel map.
+/// size is a power of two). The standard library's default, SipHash, guards against hash
+/// flooding, which keys computed from geometry cannot mount; in the screening's per-voxel map
+/// it cost an eighth of the aggregation's time (perf, a 30M-point sphere at depth 10: 5.4%
+/// of the run with SipHash, 4.7% with this; the rest is the map's scattered accesses).
 #[derive(Default)]
 pub struct KeyHasher(u64);
 

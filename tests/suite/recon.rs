@@ -347,16 +347,9 @@ fn twosheets_stay_apart_where_a_global_solve_merges_them() {
     // Concentric spheres r = 1 and 0.97 (a thin solid shell): a gap of 0.03 in a cube of 2.2,
     // i.e. 0.44 voxels at depth 5, 0.87 at depth 6, 3.5 at depth 8. scanflow at depth 8 keeps
     // both sheets with its largest grid at 72³ nodes; a global depth-8 solve needs 320³.
-    let d = tempfile::tempdir().unwrap();
-    let ply = synth(d.path(), "twosheets", 300_000, 0.0);
-    let store = d.path().join("t.store");
-    ok(&["ingest", s(&ply), "-o", s(&store), "--progress", "none"]);
-    let cube = scanflow::store::Store::open(&store).unwrap().manifest.cube;
-    let (pos, nrm) = load_points(&ply);
+    let t = Oracle::of("twosheets", 300_000);
     // The global solve loses the shell at depth 5 (gap 0.44 voxel); at depth 6 (0.87) it holds.
-    let g5 = check_mesh(&to_mesh(
-        &scanflow::pipeline::global_solve(&pos, &nrm, &cube, 5, 1.0, 0.0).unwrap(),
-    ));
+    let g5 = check_mesh(&t.global(5, 0.0));
     assert_ne!(
         g5.components, 2,
         "a global solve at depth 5 should break the shell"
@@ -366,9 +359,7 @@ fn twosheets_stay_apart_where_a_global_solve_merges_them() {
     let globals: Vec<_> = [4, 6, 7]
         .into_iter()
         .map(|depth| {
-            let g = check_mesh(&to_mesh(
-                &scanflow::pipeline::global_solve(&pos, &nrm, &cube, depth, 1.0, 0.0).unwrap(),
-            ));
+            let g = check_mesh(&t.global(depth, 0.0));
             eprintln!(
                 "global depth {depth}: {} components, {} triangles, watertight {}",
                 g.components, g.triangles, g.watertight
@@ -381,15 +372,14 @@ fn twosheets_stay_apart_where_a_global_solve_merges_them() {
         "a global solve at depth 4 should break the shell"
     );
     assert_eq!(globals[1..], [(6, 2, true), (7, 2, true)]);
-    let out = d.path().join("t_mesh.ply");
-    recon(&store, &out, &["--depth", "8"]);
+    let out = t.d.path().join("t_mesh.ply");
+    recon(&t.store, &out, &["--depth", "8"]);
     let m = read_mesh(&out).unwrap();
     let c = check_mesh(&m);
     eprintln!("scanflow depth 8: {c:?}");
     assert_eq!(c.components, 2);
     assert!(c.watertight && c.oriented);
-    let truth = scanflow::synth::Truth::load(&d.path().join("twosheets.truth.json")).unwrap();
-    let dist = scanflow::metrics::mesh_to_truth(&m, &truth, 20_000, 1);
+    let dist = scanflow::metrics::mesh_to_truth(&m, &t.truth, 20_000, 1);
     eprintln!("scanflow depth 8 distances: {dist:?}");
     // Measured: means 1.5e-4 both ways (0.02 voxel at depth 8), maxima 3.4e-3 and 4.8e-3.
     assert!(dist.to_reference.max < 0.01 && dist.from_reference.max < 0.01);
@@ -399,8 +389,8 @@ fn twosheets_stay_apart_where_a_global_solve_merges_them() {
     );
 }
 
-/// The oracle's input: a 150K-point torus without noise, ingested; its cube, points and
-/// truth.
+/// A synthetic shape without noise, ingested: its cube, points and truth, and one global
+/// solve of them (the oracle the tests measure against).
 struct Oracle {
     d: tempfile::TempDir,
     store: PathBuf,
@@ -411,14 +401,21 @@ struct Oracle {
 }
 
 impl Oracle {
+    /// A 150K-point torus.
     fn new() -> Oracle {
+        Oracle::of("torus", 150_000)
+    }
+
+    /// `points` samples of `synth` shape `shape`.
+    fn of(shape: &str, points: u32) -> Oracle {
         let d = tempfile::tempdir().unwrap();
-        let ply = synth(d.path(), "torus", 150_000, 0.0);
+        let ply = synth(d.path(), shape, points, 0.0);
         let store = d.path().join("t.store");
         ok(&["ingest", s(&ply), "-o", s(&store), "--progress", "none"]);
         let cube = scanflow::store::Store::open(&store).unwrap().manifest.cube;
         let (pos, nrm) = load_points(&ply);
-        let truth = scanflow::synth::Truth::load(&d.path().join("torus.truth.json")).unwrap();
+        let truth =
+            scanflow::synth::Truth::load(&d.path().join(format!("{shape}.truth.json"))).unwrap();
         Oracle {
             d,
             store,
