@@ -275,7 +275,8 @@ pub struct HexmeshArgs {
     #[arg(long, default_value = "polycube")]
     pub frames: String,
     /// Target hexahedron edge, in input units (default: a twentieth of the bounding box's
-    /// diagonal).
+    /// diagonal, then up to three edges each 0.85 of the last where its rounding folds
+    /// hexahedra or flips tetrahedra; a given edge is tried alone).
     #[arg(long, allow_negative_numbers = true)]
     pub scale: Option<f64>,
     /// Edge of the tetrahedra stuffed into a surface input (PLY, OBJ, STL), in input units
@@ -691,7 +692,7 @@ pub struct ReconstructArgs {
     #[arg(long, conflicts_with = "trim")]
     pub hex: Option<PathBuf>,
     /// Hexahedron edge for --hex, in input units (default: a twentieth of the surface's
-    /// bounding-box diagonal).
+    /// bounding-box diagonal, then finer edges where it folds, as hexmesh's --scale).
     #[arg(long, requires = "hex", allow_negative_numbers = true)]
     pub hex_scale: Option<f64>,
     /// Normal options.
