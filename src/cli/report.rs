@@ -84,8 +84,17 @@ pub fn reconstruct(st: &ReconStats, out: &Path, total_secs: f64) {
         .levels_above
         .iter()
         .map(|l| {
+            let summed = if l.points_summed > 0 {
+                format!(
+                    ", {:.0}% of its reads summed in {} voxels",
+                    100.0 * l.points_summed as f64 / l.points_read as f64,
+                    l.voxel_sums
+                )
+            } else {
+                String::new()
+            };
             format!(
-                " over {} leaves ({} refined) at depth {}",
+                " over {} leaves ({} refined{summed}) at depth {}",
                 l.leaves, l.refined, l.depth
             )
         })

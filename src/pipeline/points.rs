@@ -10,6 +10,7 @@ use rayon::prelude::*;
 use crate::error::Result;
 use crate::exec::cache::Lru;
 use crate::recon::density::DensityGrid;
+use crate::recon::voxel_sum::{SUM_MIN_POINTS_PER_VOXEL, VOXEL_SUM_BYTES, VoxelSum, sum_voxels};
 use crate::recon::{LeafPoints, Plan};
 use crate::store::Store;
 use crate::surface::NearPoints;
@@ -30,12 +31,16 @@ const NEAR_POINTS_WIDENINGS: usize = 6;
 /// (`types::Cube`): the same points translated are then in or out of it alike.
 const LEAF_REACH: f64 = 13.0 / 32.0;
 
-/// A store cell's points sorted by leaf cell.
+/// A store cell's points sorted by leaf cell; or, for a level above the finest where the
+/// cell is dense, its points summed per voxel of the level's lattice ([`VoxelSum`]), sorted by
+/// leaf cell.
 struct SortedCell {
     pos: Vec<[f64; 3]>,
     nrm: Vec<[f32; 3]>,
     col: Vec<[u16; 4]>,
     inten: Vec<f32>,
+    voxels: Vec<VoxelSum>,
+    /// Per leaf cell, its range of `pos` (or of `voxels`, where they are not empty).
     ranges: Vec<(CellKey, usize, usize)>,
 }
 
@@ -60,26 +65,60 @@ impl SortedCell {
         } else {
             order.iter().map(|&i| b.intensity[i as usize]).collect()
         };
-        let mut ranges = Vec::new();
-        let mut s = 0;
-        for (j, &i) in order.iter().enumerate() {
-            let k = keys[i as usize];
-            if j + 1 == order.len() || keys[order[j + 1] as usize] != k {
-                ranges.push((k, s, j + 1));
-                s = j + 1;
-            }
-        }
+        let ranges = runs(order.len(), |j| keys[order[j] as usize]);
         SortedCell {
             pos,
             nrm,
             col,
             inten,
+            voxels: Vec::new(),
+            ranges,
+        }
+    }
+
+    /// The points of `b` summed per voxel of `cube`'s lattice at `depth`, where they are at
+    /// least [`SUM_MIN_POINTS_PER_VOXEL`] a voxel; otherwise sorted as [`SortedCell::new`].
+    fn summed(b: PointBatch, cube: &Cube, depth: u32, leaf_level: u32) -> SortedCell {
+        let vox: Vec<[u32; 3]> = b.pos.iter().map(|p| cube.cell_coords(*p, depth)).collect();
+        // The leaf holding a voxel, from the voxel itself: a voxel lies in one leaf.
+        let shift = depth - leaf_level;
+        let leaf = |v: [u32; 3]| CellKey::new(leaf_level, v.map(|c| c >> shift));
+        // By leaf, then voxel (z, y, x; 21 bits each at the supported depths), then input
+        // order (the sort is stable).
+        let keys: Vec<(CellKey, u64)> = vox
+            .iter()
+            .map(|v| {
+                let packed = ((v[2] as u64) << 42) | ((v[1] as u64) << 21) | v[0] as u64;
+                (leaf(*v), packed)
+            })
+            .collect();
+        let mut order: Vec<u32> = (0..b.len() as u32).collect();
+        order.sort_by_key(|&i| keys[i as usize]);
+        let distinct = 1 + order
+            .windows(2)
+            .filter(|w| vox[w[0] as usize] != vox[w[1] as usize])
+            .count();
+        if b.is_empty() || b.len() < SUM_MIN_POINTS_PER_VOXEL * distinct {
+            return SortedCell::new(b, cube, leaf_level);
+        }
+        let pos: Vec<[f64; 3]> = order.iter().map(|&i| b.pos[i as usize]).collect();
+        let nrm: Vec<[f32; 3]> = order.iter().map(|&i| b.normal[i as usize]).collect();
+        let vs: Vec<[u32; 3]> = order.iter().map(|&i| vox[i as usize]).collect();
+        let voxels = sum_voxels(&pos, &nrm, &vs, cube, depth);
+        let ranges = runs(voxels.len(), |j| leaf(voxels[j].at.map(|c| c as u32)));
+        SortedCell {
+            pos: Vec::new(),
+            nrm: Vec::new(),
+            col: Vec::new(),
+            inten: Vec::new(),
+            voxels,
             ranges,
         }
     }
 
     fn bytes(&self) -> u64 {
         self.pos.len() as u64 * SORTED_POINT_BYTES
+            + self.voxels.len() as u64 * VOXEL_SUM_BYTES
             + self.col.len() as u64 * SORTED_COLOUR_BYTES
             + self.inten.len() as u64 * SORTED_INTENSITY_BYTES
             + self.ranges.len() as u64 * SORTED_RANGE_BYTES
@@ -93,6 +132,21 @@ impl SortedCell {
     }
 }
 
+/// The runs of equal keys among `len` sorted items (`key(j)` of item `j`): each key with its
+/// range.
+fn runs(len: usize, key: impl Fn(usize) -> CellKey) -> Vec<(CellKey, usize, usize)> {
+    let mut ranges = Vec::new();
+    let mut s = 0;
+    for j in 0..len {
+        let k = key(j);
+        if j + 1 == len || key(j + 1) != k {
+            ranges.push((k, s, j + 1));
+            s = j + 1;
+        }
+    }
+    ranges
+}
+
 /// Points of the store by leaf cell, through a cache of decoded store cells bounded in bytes.
 pub struct PointSource<'a> {
     store: &'a Store,
@@ -103,6 +157,9 @@ pub struct PointSource<'a> {
     cap: u64,
     /// The samples' shares of the surface, which weigh their normals.
     density: Arc<DensityGrid>,
+    /// Dense store cells are read summed per voxel of the plan's lattice
+    /// ([`PointSource::summing`]).
+    summing: bool,
 }
 
 impl<'a> PointSource<'a> {
@@ -136,6 +193,17 @@ impl<'a> PointSource<'a> {
             cache: Lru::new(cap),
             cap,
             density,
+            summing: false,
+        }
+    }
+
+    /// The same source reading its dense store cells summed per voxel of the plan's lattice
+    /// ([`VoxelSum`]): for the leaves of a level above the finest, which need neither single
+    /// points nor their colours.
+    pub fn summing(self) -> PointSource<'a> {
+        PointSource {
+            summing: true,
+            ..self
         }
     }
 
@@ -167,7 +235,12 @@ impl<'a> PointSource<'a> {
     fn load(&self, i: usize) -> Result<SortedCell> {
         let mut b = self.store.read_cell(i)?;
         super::reconstruct::weigh_normals(&mut b, self.plan.confidence, &self.density);
-        Ok(SortedCell::new(b, &self.plan.cube, self.plan.leaf_level))
+        let (cube, depth, leaf) = (&self.plan.cube, self.plan.depth, self.plan.leaf_level);
+        Ok(if self.summing {
+            SortedCell::summed(b, cube, depth, leaf)
+        } else {
+            SortedCell::new(b, cube, leaf)
+        })
     }
 
     fn insert(&mut self, i: usize, c: Arc<SortedCell>) {
@@ -335,16 +408,36 @@ impl<'a> PointSource<'a> {
         let reach = cell_box.grown(LEAF_REACH * (cell_box.max[0] - cell_box.min[0]));
         let mut own = LeafPoints::default();
         let mut rest = LeafPoints::default();
+        let (origin, h) = (self.plan.cube.origin, self.plan.spacing);
         for nk in Self::neighbours(key) {
             let dst = if nk == key { &mut own } else { &mut rest };
-            self.visit(nk, &reach, |sc, j| {
-                dst.pos.push(sc.pos[j]);
-                dst.nrm.push(sc.nrm[j]);
-            })?;
+            for si in self.covering(nk) {
+                let sc = self.cell(si)?;
+                let (s, e) = sc.range(nk);
+                if sc.voxels.is_empty() {
+                    for j in s..e {
+                        if reach.contains(sc.pos[j]) {
+                            dst.pos.push(sc.pos[j]);
+                            dst.nrm.push(sc.nrm[j]);
+                        }
+                    }
+                } else {
+                    // A voxel lies in the box or out of it (its faces are on the lattice):
+                    // its centre says which.
+                    for v in &sc.voxels[s..e] {
+                        let c = [0, 1, 2].map(|a| origin[a] + (v.at[a] as f64 + 0.5) * h);
+                        if reach.contains(c) {
+                            dst.voxels.push(*v);
+                        }
+                    }
+                }
+            }
         }
         own.own = own.pos.len();
+        own.own_voxels = own.voxels.len();
         own.pos.extend(rest.pos);
         own.nrm.extend(rest.nrm);
+        own.voxels.extend(rest.voxels);
         Ok(own)
     }
 }

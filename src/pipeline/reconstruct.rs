@@ -12,7 +12,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use super::merge;
-use super::points::{PointSource, SORTED_POINT_BYTES};
+use super::points::PointSource;
 use super::shard::{Claims, Shard};
 use super::tiles::{self, TileJob};
 use super::workdir::{self, WorkDir};
@@ -211,6 +211,13 @@ pub struct LevelStats {
     pub refined: usize,
     /// Those read back from checkpoints.
     pub reused: usize,
+    /// Samples its solved leaves read, each as often as a leaf's box holds it: one by one,
+    /// and summed per voxel ([`crate::recon::voxel_sum`]).
+    pub points_read: u64,
+    /// Of which summed per voxel.
+    pub points_summed: u64,
+    /// The voxel sums holding those.
+    pub voxel_sums: u64,
 }
 
 /// The ancestor of `key` at `level` (at most `key`'s level).
@@ -323,7 +330,7 @@ pub fn reconstruct(
             .iter()
             .map(|&key| ancestor(key, p.leaf_level))
             .collect();
-        let mut src = PointSource::new(store, p, point_cap, Arc::clone(&density));
+        let mut src = PointSource::new(store, p, point_cap, Arc::clone(&density)).summing();
         let name = format!("leaves at depth {}", p.depth);
         let lp = leaf_pass(
             store, &p, params, keys, &field, unit, &dirs, &mut src, &name, ctx,
@@ -333,6 +340,9 @@ pub fn reconstruct(
             leaves: lp.all.len(),
             refined: lp.refined.len(),
             reused: lp.reused,
+            points_read: lp.read[0],
+            points_summed: lp.read[1],
+            voxel_sums: lp.read[2],
         });
         let level = Level::new(p, field, lp.refined, dirs.leaves.clone(), unit, level_cache);
         field = CoarseField::level(level, levels[k - 1].coarse_ratio);
@@ -729,6 +739,9 @@ struct LeafPass {
     unit: f32,
     solved: usize,
     iterations: u64,
+    /// Samples the leaves read (each time a box holds it), of which summed per voxel, and
+    /// those voxel sums.
+    read: [u64; 3],
 }
 
 /// Pass 2: the occupied leaves of the coarse pass (taken from it), in Morton order, solved
@@ -756,6 +769,7 @@ fn leaf_pass(
         .progress
         .stage(stage_name, Some(leaves.len() as u64), "leaves");
     let (mut solved, mut iterations) = (0, 0u64);
+    let mut read = [0u64; 3];
     let rule = LeafRule {
         tolerance: params.error * store.manifest.bounds.diagonal(),
         min_points: params.least_leaf_points(plan.leaf_voxels),
@@ -791,12 +805,14 @@ fn leaf_pass(
             src.preload(&wanted, &ctx.pool)?;
             let mut todo = Vec::with_capacity(wave_idx.len());
             for &i in &wave_idx {
-                todo.push((leaves[i], src.gather(leaves[i])?));
+                let p = src.gather(leaves[i])?;
+                let summed: u64 = p.voxels.iter().map(|v| v.count as u64).sum();
+                read[0] += p.pos.len() as u64 + summed;
+                read[1] += summed;
+                read[2] += p.voxels.len() as u64;
+                todo.push((leaves[i], p));
             }
-            let pts_bytes: u64 = todo
-                .iter()
-                .map(|(_, p)| p.pos.len() as u64 * SORTED_POINT_BYTES)
-                .sum();
+            let pts_bytes: u64 = todo.iter().map(|(_, p)| p.bytes()).sum();
             // At most one solve a worker runs at once, and no more at once than fit in what
             // is free (at least one).
             let free = ctx.budget.total().saturating_sub(ctx.budget.used());
@@ -904,6 +920,7 @@ fn leaf_pass(
         unit,
         solved,
         iterations,
+        read,
     })
 }
 

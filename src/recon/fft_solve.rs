@@ -127,31 +127,36 @@ pub fn solve(grid: &LocalGrid, pos: &[[f64; 3]], nrm: &[[f32; 3]], sigma_vox: f6
 
 /// Add the normals of `pos`/`nrm` to `v` (one `[f32; 3]` per node) as a density.
 pub fn splat(grid: &LocalGrid, pos: &[[f64; 3]], nrm: &[[f32; 3]], v: &mut [[f32; 3]]) {
-    let n = grid.n;
     let inv_h = 1.0 / grid.h;
     let h_u = grid.h / grid.unit;
     let scale = (1.0 / (h_u * h_u * h_u)) as f32;
-    let ni = n as i64;
     for (p, nn) in pos.iter().zip(nrm) {
-        // Per axis: the two node indices (wrapped) and their weights.
-        let mut at = [[0usize; 2]; 3];
-        let mut w = [[0f32; 2]; 3];
-        for a in 0..3 {
-            let u = (p[a] - grid.origin[a]) * inv_h;
-            let fl = floor(u);
-            let i0 = fl as i64;
-            let f = (u - fl) as f32;
-            at[a] = [i0.rem_euclid(ni) as usize, (i0 + 1).rem_euclid(ni) as usize];
-            w[a] = [1.0 - f, f];
-        }
-        for c in 0..8usize {
-            let (dx, dy, dz) = (c & 1, (c >> 1) & 1, (c >> 2) & 1);
-            let wc = w[0][dx] * w[1][dy] * w[2][dz] * scale;
-            let cell = &mut v[(at[2][dz] * n + at[1][dy]) * n + at[0][dx]];
-            cell[0] += wc * nn[0];
-            cell[1] += wc * nn[1];
-            cell[2] += wc * nn[2];
-        }
+        let u = [0, 1, 2].map(|a| (p[a] - grid.origin[a]) * inv_h);
+        splat_node(grid.n, u, *nn, scale, v);
+    }
+}
+
+/// Add `nn · scale` to the `n³` nodes of `v` around `u` (in nodes from node 0, wrapped) by
+/// trilinear weights: one sample of [`splat`].
+pub(crate) fn splat_node(n: usize, u: [f64; 3], nn: [f32; 3], scale: f32, v: &mut [[f32; 3]]) {
+    let ni = n as i64;
+    // Per axis: the two node indices (wrapped) and their weights.
+    let mut at = [[0usize; 2]; 3];
+    let mut w = [[0f32; 2]; 3];
+    for a in 0..3 {
+        let fl = floor(u[a]);
+        let i0 = fl as i64;
+        let f = (u[a] - fl) as f32;
+        at[a] = [i0.rem_euclid(ni) as usize, (i0 + 1).rem_euclid(ni) as usize];
+        w[a] = [1.0 - f, f];
+    }
+    for c in 0..8usize {
+        let (dx, dy, dz) = (c & 1, (c >> 1) & 1, (c >> 2) & 1);
+        let wc = w[0][dx] * w[1][dy] * w[2][dz] * scale;
+        let cell = &mut v[(at[2][dz] * n + at[1][dy]) * n + at[0][dx]];
+        cell[0] += wc * nn[0];
+        cell[1] += wc * nn[1];
+        cell[2] += wc * nn[2];
     }
 }
 
@@ -298,8 +303,13 @@ impl Solver {
             grid.h
         );
         let div = self.divergence(grid, v);
+        self.solve_divergence(&div)
+    }
+
+    /// Solve from the divergence of the splatted normals ([`Solver::divergence`]).
+    pub fn solve_divergence(&self, div: &[f32]) -> Vec<f32> {
         let h1 = self.n / 2 + 1;
-        self.spectral(&div, true, |fz, fy, kx| {
+        self.spectral(div, true, |fz, fy, kx| {
             self.filter[(fz * h1 + fy) * h1 + kx]
         })
     }
@@ -367,7 +377,27 @@ impl Solver {
         screen: &Screen,
         tolerance: f64,
     ) -> (Vec<f32>, Convergence) {
-        let mut x = self.solve_splatted(grid, v);
+        let x = self.solve_splatted(grid, v);
+        self.screen_from(x, screen, tolerance)
+    }
+
+    /// [`Solver::solve_screened`] from the divergence of the splatted normals (what a device
+    /// solve that failed leaves to the CPU).
+    pub fn solve_screened_divergence(
+        &self,
+        div: &[f32],
+        screen: &Screen,
+    ) -> (Vec<f32>, Convergence) {
+        self.screen_from(self.solve_divergence(div), screen, SCREEN_TOLERANCE)
+    }
+
+    /// The conjugate gradients of [`Solver::solve_screened`] from the unscreened solution `x`.
+    fn screen_from(
+        &self,
+        mut x: Vec<f32>,
+        screen: &Screen,
+        tolerance: f64,
+    ) -> (Vec<f32>, Convergence) {
         if screen.is_empty() {
             return (x, Convergence::default());
         }

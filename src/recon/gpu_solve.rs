@@ -363,18 +363,30 @@ impl GpuSolver {
         nrm: &[[f32; 3]],
         alpha: f64,
     ) -> (Vec<f32>, Convergence) {
-        assert_eq!(grid.n, self.n, "a device solver for another grid size");
         let mut v = vec![[0f32; 3]; grid.len()];
         splat(grid, pos, nrm, &mut v);
-        let screen = Screen::from_points(grid, pos, alpha);
+        self.solve_splatted(solver, grid, v, &Screen::from_points(grid, pos, alpha))
+    }
+
+    /// The screened solve of the splatted normals `v` (consumed) on `grid` (of `solver`'s
+    /// shape), screened by `screen`, on the device; on a device failure, on the CPU (warned
+    /// once).
+    pub fn solve_splatted(
+        &self,
+        solver: &Solver,
+        grid: &LocalGrid,
+        v: Vec<[f32; 3]>,
+        screen: &Screen,
+    ) -> (Vec<f32>, Convergence) {
+        assert_eq!(grid.n, self.n, "a device solver for another grid size");
         let div = solver.divergence(grid, v);
-        match self.solve_prepared(Prepared::new(div, &screen)) {
+        match self.solve_prepared(Prepared::new(div.clone(), screen)) {
             Ok(r) => r,
             Err(e) => {
                 self.warned.call_once(|| {
                     log::warn!("a leaf solve failed on the GPU, solved on the CPU instead: {e}")
                 });
-                solver.solve_points(grid, pos, nrm, alpha)
+                solver.solve_screened_divergence(&div, screen)
             }
         }
     }

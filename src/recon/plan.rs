@@ -244,14 +244,18 @@ impl Plan {
 
     /// The fine local grid of a leaf: the cell embedded in a cube twice its size.
     pub fn leaf_fine_grid(&self, key: CellKey) -> LocalGrid {
-        let g = self.leaf_node(key);
-        let half = (self.leaf_voxels / 2) as i64;
         LocalGrid {
             n: 2 * self.leaf_voxels as usize,
             h: self.spacing,
-            origin: self.node_pos([g[0] - half, g[1] - half, g[2] - half]),
+            origin: self.node_pos(self.leaf_lattice(key)),
             unit: self.cube.size,
         }
+    }
+
+    /// The fine node of a leaf's local grids' node 0 ([`Plan::leaf_fine_grid`]).
+    pub fn leaf_lattice(&self, key: CellKey) -> [i64; 3] {
+        let half = (self.leaf_voxels / 2) as i64;
+        self.leaf_node(key).map(|g| g - half)
     }
 
     /// Scratch bytes of one leaf's fine solve.

@@ -75,6 +75,7 @@
 //! measured (sparse samples) α = 4.
 
 use super::fft_solve::LocalGrid;
+use super::voxel_sum::{OnLattice, VoxelSum, screen_voxel};
 use crate::geom::{dot, plane_basis};
 use crate::types::{KeyMap, floor};
 
@@ -473,6 +474,21 @@ impl ScreenBuilder {
                 e.0[a] += off[a];
             }
             e.1 += 1;
+        }
+    }
+
+    /// Add the samples summed per voxel of a level's lattice ([`VoxelSum`]), this builder's
+    /// grid placed on it by `on`: the same aggregates as their points give, up to rounding.
+    pub fn add_voxels(&mut self, on: OnLattice, voxels: &[VoxelSum]) {
+        let n = self.grid.n as u64;
+        for s in voxels {
+            let (v, off) = screen_voxel(self.grid.n, on, s);
+            let key = (v[2] as u64 * n + v[1] as u64) * n + v[0] as u64;
+            let e = self.voxels.entry(key).or_insert(([0.0; 3], 0));
+            for a in 0..3 {
+                e.0[a] += off[a];
+            }
+            e.1 += s.count as u64;
         }
     }
 

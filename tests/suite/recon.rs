@@ -486,7 +486,8 @@ fn two_level_matches_one_global_solve() {
 #[test]
 fn levels_of_leaves_match_one_global_solve_and_keep_the_contracts() {
     // The recursive scheme (`recon::plan::levels`): at depth 8 with --coarse-depth 4, leaves
-    // of depth 8 refine a level of leaves at depth 6 over a dense depth-4 solve. The oracle
+    // of depth 8 refine a level of leaves at depth 6 over a dense depth-4 solve, the level
+    // reading its points summed per voxel (`recon::voxel_sum`). The oracle
     // of the two-level scheme holds for it (measured means 3.41e-5 and 3.43e-5 against the
     // global solve's 4.95e-5 and the two-level's 3.45e-5), and its output keeps the
     // contracts: the same bytes for any thread count, the same triangles for any tile size,
@@ -499,6 +500,9 @@ fn levels_of_leaves_match_one_global_solve_and_keep_the_contracts() {
     let opts = ["--depth", "8", "--error", "0", "--coarse-depth", "4"];
     let o = recon(store, &three, &opts);
     assert!(o.contains("at depth 6"), "{o}");
+    // The level at depth 6 reads its store cells summed per voxel (measured: 577K reads in
+    // 33K sums, 17 points a sum).
+    assert!(o.contains("100% of its reads summed in"), "{o}");
     t.assert_like(&three, &t.global(8, 4.0), "a level at depth 6");
     // Another surface than the two-level one (its coarse field differs), not the same file.
     assert_ne!(std::fs::read(&two).unwrap(), std::fs::read(&three).unwrap());
