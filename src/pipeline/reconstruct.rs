@@ -553,6 +553,16 @@ struct CoarsePass {
     noise: NoiseStats,
 }
 
+/// A store cell read by the coarse pass: its points (normals weighed), their noise
+/// statistics and moments, and the support voxels and finest leaves they occupy (each once).
+struct CellRead {
+    batch: PointBatch,
+    noise: NoiseStats,
+    moments: Moments,
+    marks: Vec<usize>,
+    leaves: Vec<CellKey>,
+}
+
 /// The next wave of store cells from `*i` (advanced past them): at most `wave` cells, within
 /// half of what the budget has free at `per_point` bytes a point, at least one; with its bytes.
 fn cell_wave(
@@ -578,8 +588,8 @@ fn cell_wave(
 }
 
 /// Pass 0: every point's sampling density, splatted onto a grid at the coarse spacing; the
-/// cells are read in parallel waves and added in cell order (the sums are integers: the same
-/// grid in any order).
+/// cells are read in parallel waves and added in parallel over z-slabs of the grid (the sums
+/// are integers: the same grid in any order).
 fn density_pass(store: &Store, plan: &Plan, ctx: &Ctx) -> Result<DensityGrid> {
     let m = &store.manifest;
     // Charged with the coarse solve's scratch (`Plan::needs`).
@@ -591,14 +601,14 @@ fn density_pass(store: &Store, plan: &Plan, ctx: &Ctx) -> Result<DensityGrid> {
     while i < ncells {
         let (ids, bytes) = cell_wave(store, &mut i, wave, BATCH_POINT_BYTES, ctx);
         let _permit = tiles::admit_now(ctx, bytes);
-        let batches: Vec<Result<PointBatch>> = ctx
-            .pool
-            .install(|| ids.par_iter().map(|&j| store.read_cell(j)).collect());
-        for b in batches {
-            let b = b?;
-            grid.add(&b.pos);
-            stage.inc(b.len() as u64);
-        }
+        let batches: Vec<PointBatch> = ctx.pool.install(|| {
+            ids.par_iter()
+                .map(|&j| store.read_cell(j))
+                .collect::<Result<_>>()
+        })?;
+        let pos: Vec<&[[f64; 3]]> = batches.iter().map(|b| &b.pos[..]).collect();
+        ctx.pool.install(|| grid.add_batches(&pos));
+        stage.inc(batches.iter().map(|b| b.len() as u64).sum());
     }
     grid.finish();
     stage.finish(None);
@@ -608,7 +618,11 @@ fn density_pass(store: &Store, plan: &Plan, ctx: &Ctx) -> Result<DensityGrid> {
 /// Pass 1: splat every point into the coarse grid of `plan` (the top level), each normal
 /// weighed by its sample's share of the surface (pass 0); collect the occupied leaf cells of
 /// `fine` (the finest level), the noise in its voxels, the coarse voxels holding points, and
-/// the moments that refuse planar and linear inputs; solve.
+/// the moments that refuse planar and linear inputs; solve. Every part of a wave runs in
+/// parallel: the cells' reads, and then the splat and the screening's samples over z-slabs of
+/// their grids, each node and voxel taking its samples in cell order (so the bits of one
+/// thread's pass, [`fft_solve::splat_batches`]); before, the splat was one thread's, a fifth
+/// of the pass on 2 cores and its bound on many.
 fn coarse_pass(
     store: &Store,
     fine: &Plan,
@@ -634,7 +648,7 @@ fn coarse_pass(
     // voxel, admitted as it grows.
     let screened = plan.point_weight > 0.0;
     let mut noise = NoiseStats::default();
-    let mut screen = ScreenBuilder::new(&cgrid);
+    let mut screen = ScreenBuilder::with_slabs(&cgrid, ctx.threads());
     let mut screen_permit: Option<Permit> = None;
     let wave = 2 * ctx.threads();
     let jet_stride = screen::jet_stride(m.point_count);
@@ -642,19 +656,19 @@ fn coarse_pass(
     let mut i = 0;
     while i < ncells {
         // At most `wave` cells, within half of what is free (the screening samples grow into
-        // the other half), at least one. Batches are splatted in cell order whatever the
-        // waves.
+        // the other half), at least one. Each node takes its batches in cell order whatever
+        // the waves and the slabs.
         let per_point = BATCH_POINT_BYTES + NOISE_KEY_BYTES;
         let (ids, bytes) = cell_wave(store, &mut i, wave, per_point, ctx);
         // The coarse grid's permit is held: admitted without waiting (see `tiles::admit_now`).
         let _permit = tiles::admit_now(ctx, bytes);
-        // Each cell's noise statistics beside its read (for `auto` and the vertex fit);
-        // pooled below in cell order.
-        let batches: Vec<Result<(PointBatch, NoiseStats)>> = ctx.pool.install(|| {
+        // Each cell's noise statistics, moments, occupied leaves and support beside its read
+        // (for `auto` and the vertex fit); pooled below in cell order.
+        let batches: Vec<CellRead> = ctx.pool.install(|| {
             ids.par_iter()
                 .map(|&j| {
                     let mut b = store.read_cell(j)?;
-                    let st = NoiseStats::of(
+                    let noise = NoiseStats::of(
                         &b.pos,
                         &b.normal,
                         fine.cube.origin,
@@ -662,34 +676,64 @@ fn coarse_pass(
                         jet_stride,
                     );
                     weigh_normals(&mut b, plan.confidence, &density);
-                    Ok((b, st))
+                    let mut moments = Moments::new(m.bounds.min);
+                    // A cell's points are near each other: runs of one voxel or leaf are
+                    // kept once as they come, the rest once sorted.
+                    let (mut marks, mut leaves) = (Vec::new(), Vec::new());
+                    for p in &b.pos {
+                        let i = support.index([0, 1, 2].map(|a| p[a] - origin[a]));
+                        if marks.last() != Some(&i) {
+                            marks.push(i);
+                        }
+                        let k = CellKey::new(
+                            fine.leaf_level,
+                            fine.cube.cell_coords(*p, fine.leaf_level),
+                        );
+                        if leaves.last() != Some(&k) {
+                            leaves.push(k);
+                        }
+                        moments.add(*p);
+                    }
+                    marks.sort_unstable();
+                    marks.dedup();
+                    leaves.sort_unstable();
+                    leaves.dedup();
+                    Ok(CellRead {
+                        batch: b,
+                        noise,
+                        moments,
+                        marks,
+                        leaves,
+                    })
                 })
-                .collect()
-        });
-        for b in batches {
-            let (b, st) = b?;
-            noise.add(st);
-            fft_solve::splat(&cgrid, &b.pos, &b.normal, &mut v);
-            if screened {
-                screen.add(&b.pos);
-                let held = screen_permit.as_ref().map_or(0, |p| p.bytes());
-                if screen.bytes() > held {
-                    // Doubled ahead, as the map grows.
-                    screen_permit = Some(ctx.budget.acquire_now(
-                        2 * screen.bytes(),
-                        "the screening samples of the coarse solve",
-                    )?);
-                }
+                .collect::<Result<_>>()
+        })?;
+        for r in &batches {
+            noise.add(r.noise);
+            moments.merge(&r.moments);
+            r.marks.iter().for_each(|&i| support.mark_index(i));
+            occupied.extend(&r.leaves);
+            stage.inc(r.batch.len() as u64);
+        }
+        // The splat and the screening's samples, in parallel over z-slabs of their grids:
+        // each node and voxel takes its samples in cell order, whatever the slabs.
+        let splats: Vec<fft_solve::Samples> = batches
+            .iter()
+            .map(|r| (&r.batch.pos[..], &r.batch.normal[..]))
+            .collect();
+        ctx.pool
+            .install(|| fft_solve::splat_batches(&cgrid, &splats, &mut v));
+        if screened {
+            let pos: Vec<&[[f64; 3]]> = batches.iter().map(|r| &r.batch.pos[..]).collect();
+            ctx.pool.install(|| screen.add_batches(&pos));
+            let held = screen_permit.as_ref().map_or(0, |p| p.bytes());
+            if screen.bytes() > held {
+                // Doubled ahead, as the map grows.
+                screen_permit = Some(ctx.budget.acquire_now(
+                    2 * screen.bytes(),
+                    "the screening samples of the coarse solve",
+                )?);
             }
-            for p in &b.pos {
-                support.mark([0, 1, 2].map(|a| p[a] - origin[a]));
-                occupied.insert(CellKey::new(
-                    fine.leaf_level,
-                    fine.cube.cell_coords(*p, fine.leaf_level),
-                ));
-                moments.add(*p);
-            }
-            stage.inc(b.len() as u64);
         }
     }
     stage.finish(None);

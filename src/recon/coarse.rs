@@ -323,6 +323,13 @@ impl Moments {
         m[9] += q[1] * q[2];
     }
 
+    /// Add the points `other` holds (taken relative to the same origin).
+    pub fn merge(&mut self, other: &Moments) {
+        for (a, b) in self.m.iter_mut().zip(&other.m) {
+            *a += b;
+        }
+    }
+
     /// Refuse point sets that span no volume: a plane or a line has no inside. Errors name
     /// `dir` (the store).
     pub fn check_not_flat(&self, dir: &Path) -> Result<()> {

@@ -41,7 +41,9 @@
 //! **Memory**: 4 bytes a node, `(N/r + 1)³` nodes: as many as the coarse solution, beside
 //! which it is held through the leaf and tile passes (the plan charges it).
 
-use crate::types::{Cube, round_index};
+use rayon::prelude::*;
+
+use crate::types::{Cube, round_index, z_range};
 
 /// The largest factor by which a sample's normal is scaled up (or down): density contrasts
 /// up to this ratio are fully compensated (module docs).
@@ -116,12 +118,51 @@ impl DensityGrid {
 
     /// Splat the samples `pos`.
     pub fn add(&mut self, pos: &[[f64; 3]]) {
-        for p in pos {
-            for (i, w) in self.support(*p) {
-                let q = round_index(w * ONE) as u32;
-                self.counts[i] = self.counts[i].saturating_add(q);
-            }
-        }
+        self.add_batches(&[pos]);
+    }
+
+    /// Splat the batches of samples `batches`, in parallel over z-slabs of the grid (one a
+    /// thread of the pool it runs in). The counts are integers added with saturation, never
+    /// negative: the same grid in any order and for any number of slabs.
+    pub fn add_batches(&mut self, batches: &[&[[f64; 3]]]) {
+        let slab = self.n * self.n;
+        let per = self.n.div_ceil(rayon::current_num_threads().max(1));
+        let mut counts = std::mem::take(&mut self.counts);
+        let this = &*self;
+        // Per batch, the node planes its kernels reach (the axis clamps, so this bounds them).
+        let spans: Vec<Option<(usize, usize)>> = batches
+            .par_iter()
+            .map(|pos| {
+                let (lo, hi) = z_range(pos)?;
+                Some((this.axis(lo, 2).0[0], this.axis(hi, 2).0[2]))
+            })
+            .collect();
+        counts
+            .par_chunks_mut(per * slab)
+            .enumerate()
+            .for_each(|(s, chunk)| {
+                let (lo, hi) = (s * per, s * per + chunk.len() / slab);
+                for (pos, zs) in batches.iter().zip(&spans) {
+                    if zs.is_some_and(|(a, b)| b < lo || a >= hi) {
+                        continue;
+                    }
+                    for p in *pos {
+                        let (az, _) = this.axis(p[2], 2);
+                        if az.iter().all(|&z| z < lo || z >= hi) {
+                            continue;
+                        }
+                        for (i, w) in this.support(*p) {
+                            let z = i / slab;
+                            if z >= lo && z < hi {
+                                let q = round_index(w * ONE) as u32;
+                                let c = &mut chunk[i - lo * slab];
+                                *c = c.saturating_add(q);
+                            }
+                        }
+                    }
+                }
+            });
+        self.counts = counts;
     }
 
     /// Compute `W̄` once every sample is splatted.
@@ -185,6 +226,33 @@ mod tests {
             }
         }
         v
+    }
+
+    #[test]
+    fn slabs_add_the_counts_of_one_pass_for_any_thread_count() {
+        // Tilted planes in three batches, one spanning the cube's whole height.
+        let mut pts = plane(0.1, 0.9, 120);
+        for (i, p) in pts.iter_mut().enumerate() {
+            p[2] = 0.05 + 0.9 * p[0] * (1.0 + (i % 7) as f64 * 0.01);
+        }
+        let batches: Vec<&[[f64; 3]]> = vec![&pts[..5000], &pts[5000..5001], &pts[5001..]];
+        let mut want = DensityGrid::new(&unit(), 32);
+        for b in &batches {
+            for p in *b {
+                for (i, w) in want.support(*p) {
+                    want.counts[i] += round_index(w * ONE) as u32;
+                }
+            }
+        }
+        for threads in [1, 2, 5, 16] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            let mut got = DensityGrid::new(&unit(), 32);
+            pool.install(|| got.add_batches(&batches));
+            assert!(got.counts == want.counts, "{threads} threads");
+        }
     }
 
     #[test]

@@ -41,7 +41,7 @@ use rustfft::num_complex::Complex32;
 use rustfft::{Fft, FftPlanner};
 
 use super::screen::Screen;
-use crate::types::floor;
+use crate::types::{floor, z_range};
 
 /// A periodic grid of `n` nodes per axis.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -57,6 +57,16 @@ pub struct LocalGrid {
 }
 
 impl LocalGrid {
+    /// Node planes `lo ..= hi` (along z) holding every one that the trilinear weights of
+    /// samples at `pos` reach (a plane to spare each side, for rounding), where they lie
+    /// within the grid without wrapping; `None` otherwise (or for no samples).
+    pub fn z_planes(&self, pos: &[[f64; 3]]) -> Option<(i64, i64)> {
+        let (lo, hi) = z_range(pos)?;
+        let node = |z: f64| floor((z - self.origin[2]) / self.h) as i64;
+        let (lo, hi) = (node(lo) - 1, node(hi) + 2);
+        (lo >= 0 && hi < self.n as i64).then_some((lo, hi))
+    }
+
     /// Number of nodes.
     pub fn len(&self) -> usize {
         self.n * self.n * self.n
@@ -127,33 +137,89 @@ pub fn solve(grid: &LocalGrid, pos: &[[f64; 3]], nrm: &[[f32; 3]], sigma_vox: f6
 
 /// Add the normals of `pos`/`nrm` to `v` (one `[f32; 3]` per node) as a density.
 pub fn splat(grid: &LocalGrid, pos: &[[f64; 3]], nrm: &[[f32; 3]], v: &mut [[f32; 3]]) {
+    splat_slab(grid, pos, nrm, 0, v);
+}
+
+/// [`splat`] onto the nodes of the z-slab `z0 .. z0 + v.len()/n²` alone (`v` holds them,
+/// z slowest): each of them takes the same additions in the same order as in one [`splat`]
+/// of the grid, so slabs splatted in parallel ([`splat_batches`]) give its bits.
+pub fn splat_slab(
+    grid: &LocalGrid,
+    pos: &[[f64; 3]],
+    nrm: &[[f32; 3]],
+    z0: usize,
+    v: &mut [[f32; 3]],
+) {
     let inv_h = 1.0 / grid.h;
     let h_u = grid.h / grid.unit;
     let scale = (1.0 / (h_u * h_u * h_u)) as f32;
     for (p, nn) in pos.iter().zip(nrm) {
         let u = [0, 1, 2].map(|a| (p[a] - grid.origin[a]) * inv_h);
-        splat_node(grid.n, u, *nn, scale, v);
+        splat_node(grid.n, u, *nn, scale, z0, v);
     }
 }
 
-/// Add `nn · scale` to the `n³` nodes of `v` around `u` (in nodes from node 0, wrapped) by
-/// trilinear weights: one sample of [`splat`].
-pub(crate) fn splat_node(n: usize, u: [f64; 3], nn: [f32; 3], scale: f32, v: &mut [[f32; 3]]) {
+/// A batch of samples: positions (world frame) and normals.
+pub type Samples<'a> = (&'a [[f64; 3]], &'a [[f32; 3]]);
+
+/// [`splat`] the batches `(pos, nrm)` in order onto `v`, in parallel over z-slabs of the
+/// grid (one a thread of the pool it runs in): the bits of one [`splat`] of the batches in
+/// order, for any number of slabs ([`splat_slab`]).
+pub fn splat_batches(grid: &LocalGrid, batches: &[Samples<'_>], v: &mut [[f32; 3]]) {
+    let slab = grid.n * grid.n;
+    let per = grid.n.div_ceil(rayon::current_num_threads().max(1));
+    let planes: Vec<Option<(i64, i64)>> = batches
+        .par_iter()
+        .map(|(pos, _)| grid.z_planes(pos))
+        .collect();
+    v.par_chunks_mut(per * slab)
+        .enumerate()
+        .for_each(|(s, chunk)| {
+            let (z0, z1) = ((s * per) as i64, (s * per + chunk.len() / slab) as i64);
+            for ((pos, nrm), zs) in batches.iter().zip(&planes) {
+                // A batch whose nodes all lie beyond the slab adds nothing to it.
+                if zs.is_some_and(|(lo, hi)| hi < z0 || lo >= z1) {
+                    continue;
+                }
+                splat_slab(grid, pos, nrm, z0 as usize, chunk);
+            }
+        });
+}
+
+/// Add `nn · scale` to the nodes around `u` (in nodes from node 0, wrapped into `n³`) by
+/// trilinear weights, those of the z-slab that `v` holds from `z0` on: one sample of
+/// [`splat_slab`].
+pub(crate) fn splat_node(
+    n: usize,
+    u: [f64; 3],
+    nn: [f32; 3],
+    scale: f32,
+    z0: usize,
+    v: &mut [[f32; 3]],
+) {
     let ni = n as i64;
+    let z1 = z0 + v.len() / (n * n);
     // Per axis: the two node indices (wrapped) and their weights.
     let mut at = [[0usize; 2]; 3];
     let mut w = [[0f32; 2]; 3];
-    for a in 0..3 {
+    for a in (0..3).rev() {
         let fl = floor(u[a]);
         let i0 = fl as i64;
         let f = (u[a] - fl) as f32;
         at[a] = [i0.rem_euclid(ni) as usize, (i0 + 1).rem_euclid(ni) as usize];
         w[a] = [1.0 - f, f];
+        if a == 2 && at[2].iter().all(|&z| z < z0 || z >= z1) {
+            return;
+        }
     }
     for c in 0..8usize {
         let (dx, dy, dz) = (c & 1, (c >> 1) & 1, (c >> 2) & 1);
+        let z = at[2][dz];
+        if z < z0 || z >= z1 {
+            continue;
+        }
         let wc = w[0][dx] * w[1][dy] * w[2][dz] * scale;
-        let cell = &mut v[(at[2][dz] * n + at[1][dy]) * n + at[0][dx]];
+        let cell = &mut v[((z - z0) * n + at[1][dy]) * n + at[0][dx]];
         cell[0] += wc * nn[0];
         cell[1] += wc * nn[1];
         cell[2] += wc * nn[2];
@@ -586,6 +652,7 @@ impl Solver {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::recon::screen::ScreenBuilder;
 
     /// In-place 3D FFT of an `n³` cube (x fastest) with the 1D plan `fft` along each axis.
     fn fft3(data: &mut [Complex32], n: usize, fft: &Arc<dyn Fft<f32>>) {
@@ -832,6 +899,48 @@ mod tests {
             }
         }
         (pos, nrm)
+    }
+
+    #[test]
+    fn slabs_splat_and_screen_the_bits_of_one_pass_for_any_thread_count() {
+        // A sphere of radius 0.5 in batches of uneven sizes, the third reaching past the
+        // grid (its weights wrap, so no slab may skip it).
+        let (mut pos, nrm) = relief_sphere(60, 0.1, 7.0);
+        pos[5][2] = 1.01;
+        let g = sphere_grid();
+        let cuts = [0, 1000, 4000, 4001, pos.len()];
+        let batches: Vec<Samples> = cuts
+            .windows(2)
+            .map(|w| (&pos[w[0]..w[1]], &nrm[w[0]..w[1]]))
+            .collect();
+        let mut want = vec![[0f32; 3]; g.len()];
+        let mut one = ScreenBuilder::new(&g);
+        for (p, n) in &batches {
+            splat(&g, p, n, &mut want);
+            one.add(p);
+        }
+        let want_screen = one.finish(2.0);
+        for threads in [1, 2, 3, 7] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            let mut got = vec![[0f32; 3]; g.len()];
+            let mut sb = ScreenBuilder::with_slabs(&g, threads);
+            let pos_only: Vec<&[[f64; 3]]> = batches.iter().map(|b| b.0).collect();
+            pool.install(|| {
+                splat_batches(&g, &batches, &mut got);
+                sb.add_batches(&pos_only);
+            });
+            assert!(got == want, "{threads} threads: another splat");
+            let s = sb.finish(2.0);
+            assert!(
+                s.nodes() == want_screen.nodes()
+                    && s.weights() == want_screen.weights()
+                    && s.gamma() == want_screen.gamma(),
+                "{threads} threads: another screening"
+            );
+        }
     }
 
     fn sphere_grid() -> LocalGrid {

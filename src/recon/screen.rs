@@ -74,6 +74,8 @@
 //! solves, and any thread count, tile size or shard, share it. Where nothing could be
 //! measured (sparse samples) α = 4.
 
+use rayon::prelude::*;
+
 use super::fft_solve::LocalGrid;
 use super::voxel_sum::{OnLattice, VoxelSum, screen_voxel};
 use crate::geom::{dot, plane_basis};
@@ -442,39 +444,91 @@ fn voxel_mean(
 /// Samples gathered per voxel of a grid, before [`ScreenBuilder::finish`] weighs them.
 pub struct ScreenBuilder {
     grid: LocalGrid,
-    /// Per wrapped voxel (`(z·n + y)·n + x`): the sum of the samples' offsets in the voxel
-    /// (in voxels) and their count.
-    voxels: KeyMap<u64, ([f64; 3], u64)>,
+    /// Per z-slab of the grid's voxels (`per` planes each, the last maybe fewer), per wrapped
+    /// voxel (`(z·n + y)·n + x`): the sum of the samples' offsets in the voxel (in voxels)
+    /// and their count. Slabs take their samples in parallel ([`ScreenBuilder::add_batches`]).
+    slabs: Vec<KeyMap<u64, ([f64; 3], u64)>>,
+    per: usize,
+}
+
+/// One map of a [`ScreenBuilder`]: the samples of `pos` whose voxel lies in planes
+/// `z0 .. z1` added to `map`.
+fn add_samples(
+    g: &LocalGrid,
+    map: &mut KeyMap<u64, ([f64; 3], u64)>,
+    pos: &[[f64; 3]],
+    (z0, z1): (u64, u64),
+) {
+    let n = g.n as i64;
+    'points: for p in pos {
+        let mut key = 0u64;
+        let mut off = [0f64; 3];
+        for a in (0..3).rev() {
+            let u = (p[a] - g.origin[a]) / g.h;
+            let fl = floor(u);
+            off[a] = u - fl;
+            let i = (fl as i64).rem_euclid(n) as u64;
+            if a == 2 && (i < z0 || i >= z1) {
+                continue 'points;
+            }
+            key = key * g.n as u64 + i;
+        }
+        let e = map.entry(key).or_insert(([0.0; 3], 0));
+        for a in 0..3 {
+            e.0[a] += off[a];
+        }
+        e.1 += 1;
+    }
 }
 
 impl ScreenBuilder {
     /// No samples yet, on `grid`.
     pub fn new(grid: &LocalGrid) -> ScreenBuilder {
+        ScreenBuilder::with_slabs(grid, 1)
+    }
+
+    /// No samples yet, on `grid`, its voxels split into `slabs` z-slabs that
+    /// [`ScreenBuilder::add_batches`] fills in parallel (the same operator for any count).
+    pub fn with_slabs(grid: &LocalGrid, slabs: usize) -> ScreenBuilder {
+        let per = grid.n.div_ceil(slabs.clamp(1, grid.n.max(1)));
         ScreenBuilder {
             grid: *grid,
-            voxels: KeyMap::default(),
+            slabs: (0..grid.n.div_ceil(per).max(1))
+                .map(|_| KeyMap::default())
+                .collect(),
+            per,
         }
+    }
+
+    /// The planes of slab `s`.
+    fn planes(&self, s: usize) -> (u64, u64) {
+        ((s * self.per) as u64, ((s + 1) * self.per) as u64)
     }
 
     /// Add the samples at `pos` (world frame).
     pub fn add(&mut self, pos: &[[f64; 3]]) {
-        let g = &self.grid;
-        let n = g.n as i64;
-        for p in pos {
-            let mut key = 0u64;
-            let mut off = [0f64; 3];
-            for a in (0..3).rev() {
-                let u = (p[a] - g.origin[a]) / g.h;
-                let fl = floor(u);
-                off[a] = u - fl;
-                key = key * g.n as u64 + (fl as i64).rem_euclid(n) as u64;
-            }
-            let e = self.voxels.entry(key).or_insert(([0.0; 3], 0));
-            for a in 0..3 {
-                e.0[a] += off[a];
-            }
-            e.1 += 1;
+        for s in 0..self.slabs.len() {
+            let planes = self.planes(s);
+            add_samples(&self.grid, &mut self.slabs[s], pos, planes);
         }
+    }
+
+    /// Add the batches of samples `batches` in order, the slabs in parallel (on the pool it
+    /// runs in): each voxel takes the same samples in the same order as from [`ScreenBuilder::add`].
+    pub fn add_batches(&mut self, batches: &[&[[f64; 3]]]) {
+        let (g, per) = (self.grid, self.per as u64);
+        let spans: Vec<Option<(i64, i64)>> =
+            batches.par_iter().map(|pos| g.z_planes(pos)).collect();
+        self.slabs.par_iter_mut().enumerate().for_each(|(s, map)| {
+            let planes = (s as u64 * per, (s as u64 + 1) * per);
+            for (pos, zs) in batches.iter().zip(&spans) {
+                // A batch whose voxels all lie beyond the slab adds nothing to it.
+                if zs.is_some_and(|(lo, hi)| hi < planes.0 as i64 || lo >= planes.1 as i64) {
+                    continue;
+                }
+                add_samples(&g, map, pos, planes);
+            }
+        });
     }
 
     /// Add the samples summed per voxel of a level's lattice ([`VoxelSum`]), this builder's
@@ -484,7 +538,9 @@ impl ScreenBuilder {
         for s in voxels {
             let (v, off) = screen_voxel(self.grid.n, on, s);
             let key = (v[2] as u64 * n + v[1] as u64) * n + v[0] as u64;
-            let e = self.voxels.entry(key).or_insert(([0.0; 3], 0));
+            let e = self.slabs[v[2] / self.per]
+                .entry(key)
+                .or_insert(([0.0; 3], 0));
             for a in 0..3 {
                 e.0[a] += off[a];
             }
@@ -494,13 +550,13 @@ impl ScreenBuilder {
 
     /// Bytes the builder holds: one map entry per occupied voxel.
     pub fn bytes(&self) -> u64 {
-        self.voxels.capacity() as u64 * VOXEL_ENTRY_BYTES
+        self.slabs.iter().map(|m| m.capacity() as u64).sum::<u64>() * VOXEL_ENTRY_BYTES
     }
 
     /// The screening operator with weight `alpha` (see the module docs).
     pub fn finish(self, alpha: f64) -> Screen {
         let g = self.grid;
-        let mut voxels: Vec<(u64, ([f64; 3], u64))> = self.voxels.into_iter().collect();
+        let mut voxels: Vec<(u64, ([f64; 3], u64))> = self.slabs.into_iter().flatten().collect();
         voxels.sort_unstable_by_key(|v| v.0);
         let total: u64 = voxels.iter().map(|v| v.1.1).sum();
         let mut s = Screen {

@@ -29,11 +29,20 @@ impl Support {
             .map(|a| (((p[a] - self.origin[a]) * self.inv_h).floor() as i64).clamp(0, self.n - 1))
     }
 
+    /// The index of input point `p`'s voxel, for [`Support::mark_index`].
+    pub fn index(&self, p: [f64; 3]) -> usize {
+        let c = self.cell(p);
+        ((c[2] * self.n + c[1]) * self.n + c[0]) as usize
+    }
+
+    /// Mark the voxel of index `i` ([`Support::index`]).
+    pub fn mark_index(&mut self, i: usize) {
+        self.bits[i / 64] |= 1 << (i % 64);
+    }
+
     /// Mark the voxel of input point `p`.
     pub fn mark(&mut self, p: [f64; 3]) {
-        let c = self.cell(p);
-        let i = ((c[2] * self.n + c[1]) * self.n + c[0]) as usize;
-        self.bits[i / 64] |= 1 << (i % 64);
+        self.mark_index(self.index(p));
     }
 
     /// True when a point lies in the coarse voxel of `p` or one of its 26 neighbours.
