@@ -10,14 +10,16 @@ use rayon::prelude::*;
 use crate::error::Result;
 use crate::exec::cache::Lru;
 use crate::recon::density::DensityGrid;
+use crate::recon::leaf::LEAF_POINT_BYTES;
 use crate::recon::voxel_sum::{SUM_MIN_POINTS_PER_VOXEL, VOXEL_SUM_BYTES, VoxelSum, sum_voxels};
 use crate::recon::{LeafPoints, Plan};
 use crate::store::Store;
 use crate::surface::NearPoints;
 use crate::types::{Aabb, CellKey, Cube, PointBatch};
 
-/// Bytes a sorted point holds: position f64×3 (24) and normal f32×3 (12).
-pub const SORTED_POINT_BYTES: u64 = 36;
+/// Bytes a sorted point holds: position f64×3 (24) and normal f32×3 (12), as in a leaf's
+/// points.
+pub const SORTED_POINT_BYTES: u64 = LEAF_POINT_BYTES;
 /// Bytes a sorted point's colour holds: RGBA u16×4.
 const SORTED_COLOUR_BYTES: u64 = 8;
 /// Bytes a sorted point's intensity holds: f32.
@@ -129,6 +131,18 @@ impl SortedCell {
             Ok(i) => (self.ranges[i].1, self.ranges[i].2),
             Err(_) => (0, 0),
         }
+    }
+
+    /// The indices in `pos` of leaf cell `k`'s points (none in a summed cell).
+    fn points_of(&self, k: CellKey) -> std::ops::Range<usize> {
+        let (s, e) = self.range(k);
+        if self.voxels.is_empty() { s..e } else { 0..0 }
+    }
+
+    /// Leaf cell `k`'s voxel sums (none in a cell of points).
+    fn voxels_of(&self, k: CellKey) -> &[VoxelSum] {
+        let (s, e) = self.range(k);
+        &self.voxels[s.min(self.voxels.len())..e.min(self.voxels.len())]
     }
 }
 
@@ -322,7 +336,7 @@ impl<'a> PointSource<'a> {
     }
 
     /// Call `f(cell, j)` for each point `j` of leaf-level cell `k` that lies in `bx`, in the
-    /// store's order.
+    /// store's order (a summed cell's are visited by [`PointSource::visit_voxels`]).
     fn visit(
         &mut self,
         k: CellKey,
@@ -331,10 +345,26 @@ impl<'a> PointSource<'a> {
     ) -> Result<()> {
         for si in self.covering(k) {
             let sc = self.cell(si)?;
-            let (s, e) = sc.range(k);
-            for j in s..e {
+            for j in sc.points_of(k) {
                 if bx.contains(sc.pos[j]) {
                     f(&sc, j);
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Call `f(sum)` for each voxel sum of leaf-level cell `k` (in its summed store cells)
+    /// whose voxel lies in `bx`, a box whose faces are on the plan's lattice: a voxel lies in
+    /// it or out of it, and its centre says which.
+    fn visit_voxels(&mut self, k: CellKey, bx: &Aabb, mut f: impl FnMut(&VoxelSum)) -> Result<()> {
+        let (origin, h) = (self.plan.cube.origin, self.plan.spacing);
+        for si in self.covering(k) {
+            let sc = self.cell(si)?;
+            for v in sc.voxels_of(k) {
+                let c = [0, 1, 2].map(|a| origin[a] + (v.at[a] as f64 + 0.5) * h);
+                if bx.contains(c) {
+                    f(v);
                 }
             }
         }
@@ -408,30 +438,13 @@ impl<'a> PointSource<'a> {
         let reach = cell_box.grown(LEAF_REACH * (cell_box.max[0] - cell_box.min[0]));
         let mut own = LeafPoints::default();
         let mut rest = LeafPoints::default();
-        let (origin, h) = (self.plan.cube.origin, self.plan.spacing);
         for nk in Self::neighbours(key) {
             let dst = if nk == key { &mut own } else { &mut rest };
-            for si in self.covering(nk) {
-                let sc = self.cell(si)?;
-                let (s, e) = sc.range(nk);
-                if sc.voxels.is_empty() {
-                    for j in s..e {
-                        if reach.contains(sc.pos[j]) {
-                            dst.pos.push(sc.pos[j]);
-                            dst.nrm.push(sc.nrm[j]);
-                        }
-                    }
-                } else {
-                    // A voxel lies in the box or out of it (its faces are on the lattice):
-                    // its centre says which.
-                    for v in &sc.voxels[s..e] {
-                        let c = [0, 1, 2].map(|a| origin[a] + (v.at[a] as f64 + 0.5) * h);
-                        if reach.contains(c) {
-                            dst.voxels.push(*v);
-                        }
-                    }
-                }
-            }
+            self.visit(nk, &reach, |sc, j| {
+                dst.pos.push(sc.pos[j]);
+                dst.nrm.push(sc.nrm[j]);
+            })?;
+            self.visit_voxels(nk, &reach, |v| dst.voxels.push(*v))?;
         }
         own.own = own.pos.len();
         own.own_voxels = own.voxels.len();

@@ -340,9 +340,9 @@ pub fn reconstruct(
             leaves: lp.all.len(),
             refined: lp.refined.len(),
             reused: lp.reused,
-            points_read: lp.read[0],
-            points_summed: lp.read[1],
-            voxel_sums: lp.read[2],
+            points_read: lp.read.points,
+            points_summed: lp.read.summed,
+            voxel_sums: lp.read.sums,
         });
         let level = Level::new(p, field, lp.refined, dirs.leaves.clone(), unit, level_cache);
         field = CoarseField::level(level, levels[k - 1].coarse_ratio);
@@ -783,9 +783,19 @@ struct LeafPass {
     unit: f32,
     solved: usize,
     iterations: u64,
-    /// Samples the leaves read (each time a box holds it), of which summed per voxel, and
-    /// those voxel sums.
-    read: [u64; 3],
+    /// What the leaves read.
+    read: SampleReads,
+}
+
+/// The samples a leaf pass's solved leaves read, each as often as a leaf's box holds it.
+#[derive(Default)]
+struct SampleReads {
+    /// Samples, one by one and summed alike.
+    points: u64,
+    /// Of which summed per voxel.
+    summed: u64,
+    /// The voxel sums holding those.
+    sums: u64,
 }
 
 /// Pass 2: the occupied leaves of the coarse pass (taken from it), in Morton order, solved
@@ -813,7 +823,7 @@ fn leaf_pass(
         .progress
         .stage(stage_name, Some(leaves.len() as u64), "leaves");
     let (mut solved, mut iterations) = (0, 0u64);
-    let mut read = [0u64; 3];
+    let mut read = SampleReads::default();
     let rule = LeafRule {
         tolerance: params.error * store.manifest.bounds.diagonal(),
         min_points: params.least_leaf_points(plan.leaf_voxels),
@@ -851,9 +861,9 @@ fn leaf_pass(
             for &i in &wave_idx {
                 let p = src.gather(leaves[i])?;
                 let summed: u64 = p.voxels.iter().map(|v| v.count as u64).sum();
-                read[0] += p.pos.len() as u64 + summed;
-                read[1] += summed;
-                read[2] += p.voxels.len() as u64;
+                read.points += p.pos.len() as u64 + summed;
+                read.summed += summed;
+                read.sums += p.voxels.len() as u64;
                 todo.push((leaves[i], p));
             }
             let pts_bytes: u64 = todo.iter().map(|(_, p)| p.bytes()).sum();

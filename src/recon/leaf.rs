@@ -29,7 +29,7 @@ pub struct LeafPoints {
 }
 
 /// Bytes a point of [`LeafPoints`] holds: position f64×3 and normal f32×3.
-const LEAF_POINT_BYTES: u64 = 36;
+pub const LEAF_POINT_BYTES: u64 = 36;
 
 impl LeafPoints {
     /// The samples in the cell itself, points and summed alike.

@@ -500,27 +500,26 @@ impl ScreenBuilder {
         }
     }
 
-    /// The planes of slab `s`.
-    fn planes(&self, s: usize) -> (u64, u64) {
-        ((s * self.per) as u64, ((s + 1) * self.per) as u64)
+    /// The planes `z0 .. z1` of slab `s`, `per` planes a slab.
+    fn planes(per: usize, s: usize) -> (u64, u64) {
+        ((s * per) as u64, ((s + 1) * per) as u64)
     }
 
     /// Add the samples at `pos` (world frame).
     pub fn add(&mut self, pos: &[[f64; 3]]) {
-        for s in 0..self.slabs.len() {
-            let planes = self.planes(s);
-            add_samples(&self.grid, &mut self.slabs[s], pos, planes);
+        for (s, map) in self.slabs.iter_mut().enumerate() {
+            add_samples(&self.grid, map, pos, Self::planes(self.per, s));
         }
     }
 
     /// Add the batches of samples `batches` in order, the slabs in parallel (on the pool it
     /// runs in): each voxel takes the same samples in the same order as from [`ScreenBuilder::add`].
     pub fn add_batches(&mut self, batches: &[&[[f64; 3]]]) {
-        let (g, per) = (self.grid, self.per as u64);
+        let (g, per) = (self.grid, self.per);
         let spans: Vec<Option<(i64, i64)>> =
             batches.par_iter().map(|pos| g.z_planes(pos)).collect();
         self.slabs.par_iter_mut().enumerate().for_each(|(s, map)| {
-            let planes = (s as u64 * per, (s as u64 + 1) * per);
+            let planes = Self::planes(per, s);
             for (pos, zs) in batches.iter().zip(&spans) {
                 // A batch whose voxels all lie beyond the slab adds nothing to it.
                 if zs.is_some_and(|(lo, hi)| hi < planes.0 as i64 || lo >= planes.1 as i64) {
