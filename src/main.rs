@@ -3,6 +3,11 @@
 
 mod cli;
 
+/// glibc's malloc with one arena, or mimalloc where the budget leaves room for it
+/// (`scanflow::exec::alloc`: chosen per run).
+#[global_allocator]
+static ALLOC: scanflow::exec::alloc::Alloc = scanflow::exec::alloc::Alloc;
+
 use std::process::ExitCode;
 
 use cli::args::{Cli, ParseError};
@@ -20,7 +25,9 @@ const FAILED: u8 = 1;
 /// freed on one worker and wanted on another, were held twice: a 1M-point reconstruction at
 /// depth 9 under `--mem 128M` peaked at 185 to 223 MiB with the default arenas and 121 MiB
 /// with one, in the same time (10.5 s and 10.1 s without `--mem`). A fixed mmap threshold
-/// (1 MiB) also returned the memory but made the run 2.3× slower.
+/// (1 MiB) also returned the memory but made the run 2.3× slower. On many cores the one
+/// arena is the bound; runs with room in their budget take mimalloc instead
+/// (`scanflow::exec::alloc`).
 #[cfg(all(target_os = "linux", target_env = "gnu"))]
 fn one_malloc_arena() {
     // SAFETY: mallopt only sets a parameter of glibc's allocator; called first in main,

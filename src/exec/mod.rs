@@ -4,6 +4,7 @@
 //! does not fit waits on a condition variable. Work runs on a rayon pool of exactly
 //! `--threads` workers; output order is fixed by sequence numbers, never by thread timing.
 
+pub mod alloc;
 pub mod budget;
 pub mod cache;
 pub mod progress;
@@ -179,10 +180,13 @@ pub struct Ctx {
 
 impl Ctx {
     /// A context with `threads` workers (0: one per core) and `mem_bytes` of budget.
+    /// The budget is `mem_bytes` less what [`alloc::for_run`] sets aside for the allocator.
     pub fn new(threads: usize, mem_bytes: u64, progress: progress::Progress) -> Result<Ctx> {
+        let pool = pool(threads)?;
+        let buffers = alloc::for_run(pool.current_num_threads(), mem_bytes);
         Ok(Ctx {
-            pool: pool(threads)?,
-            budget: budget::Budget::new(mem_bytes),
+            pool,
+            budget: budget::Budget::new(buffers),
             progress,
         })
     }

@@ -34,7 +34,12 @@
 //! nodes): the leaf stage 27.8 s against 38.2 s on the CPU, batches of 4.3 leaves on average;
 //! for a 100M-point sphere's larger plan 51 against 48 leaves a second. The host's share of
 //! each leaf (splat, divergence, screen, the coarse local solve, the detail) and the one
-//! device thread bound it; see `scripts/bench_gpu.sh`.
+//! device thread bound it; see `scripts/bench_gpu.sh`. Measured again on an H200 with the
+//! leaf pass running twice `--threads` workers (a worker waits for its batch) and mimalloc:
+//! depth 10, 5.6 s against 10.3 s; depth 11, 16.5 s against 27.1 s (batches of 5.4 leaves;
+//! the device thread busy 11.2 s, of which 6.7 s submissions and flag reads, 1.9 s uploads,
+//! 2.6 s read-backs; the workers wait 34% of their time). [`GpuSolveStats`] splits the
+//! device thread's time so the log shows which part bounds a run.
 //!
 //! # What differs from the CPU solve
 //!
@@ -215,6 +220,19 @@ pub struct GpuSolveStats {
     pub submissions: u64,
     /// Seconds the device thread spent on batches (uploads, kernels, read-backs).
     pub busy_s: f64,
+    /// Of `busy_s`: building the batch's lists and writing them to the device.
+    pub upload_s: f64,
+    /// Of `busy_s`: the submissions, each waited for by reading the leaves' flags.
+    pub kernel_s: f64,
+    /// Of `busy_s`: copying the solutions back.
+    pub read_s: f64,
+    /// Seconds the device thread waited for leaves.
+    pub idle_s: f64,
+    /// Seconds the workers spent on a device solve's host side (the divergence, the
+    /// screen's transposed lists).
+    pub host_s: f64,
+    /// Seconds the workers waited for their solutions, summed over workers.
+    pub wait_s: f64,
     /// Leaves whose batch failed on the device (solved on the CPU).
     pub failed: u64,
 }
@@ -296,7 +314,9 @@ impl GpuSolver {
             .name("scanflow-gpu-solve".into())
             .spawn(move || {
                 let mut broken: Option<String> = None;
+                let mut waiting = Instant::now();
                 while let Ok(first) = rx.recv() {
+                    let idle = waiting.elapsed().as_secs_f64();
                     let mut reqs = vec![first];
                     while reqs.len() < dev.max_batch {
                         match rx.try_recv() {
@@ -311,11 +331,15 @@ impl GpuSolver {
                     };
                     let mut s = st.lock().unwrap_or_else(|e| e.into_inner());
                     s.busy_s += t0.elapsed().as_secs_f64();
+                    s.idle_s += idle;
                     match out {
-                        Ok((sols, subs)) => {
+                        Ok((sols, t)) => {
                             s.leaves += reqs.len() as u64;
                             s.batches += 1;
-                            s.submissions += subs;
+                            s.submissions += t.submissions;
+                            s.upload_s += t.upload_s;
+                            s.kernel_s += t.kernel_s;
+                            s.read_s += t.read_s;
                             for (r, sol) in reqs.into_iter().zip(sols) {
                                 let _ = r.reply.send(Ok(sol));
                             }
@@ -330,6 +354,8 @@ impl GpuSolver {
                             }
                         }
                     }
+                    drop(s);
+                    waiting = Instant::now();
                 }
             })
             .expect("spawning a thread");
@@ -379,8 +405,17 @@ impl GpuSolver {
         screen: &Screen,
     ) -> (Vec<f32>, Convergence) {
         assert_eq!(grid.n, self.n, "a device solver for another grid size");
+        let t0 = Instant::now();
         let div = solver.divergence(grid, v);
-        match self.solve_prepared(Prepared::new(div.clone(), screen)) {
+        let leaf = Prepared::new(div.clone(), screen);
+        let t1 = Instant::now();
+        let out = self.solve_prepared(leaf);
+        {
+            let mut s = self.stats.lock().unwrap_or_else(|e| e.into_inner());
+            s.host_s += (t1 - t0).as_secs_f64();
+            s.wait_s += t1.elapsed().as_secs_f64();
+        }
+        match out {
             Ok(r) => r,
             Err(e) => {
                 self.warned.call_once(|| {
@@ -633,7 +668,10 @@ impl Device {
     }
 
     /// Solve a batch; returns each leaf's solution and convergence, and the submissions.
-    fn run(&mut self, leaves: Vec<&Prepared>) -> std::result::Result<(Vec<Reply0>, u64), String> {
+    fn run(
+        &mut self,
+        leaves: Vec<&Prepared>,
+    ) -> std::result::Result<(Vec<Reply0>, Timing), String> {
         let scopes = adapter::push_scopes(&self.device);
         let out =
             std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| self.run_inner(&leaves)));
@@ -652,7 +690,8 @@ impl Device {
     fn run_inner(
         &mut self,
         leaves: &[&Prepared],
-    ) -> std::result::Result<(Vec<Reply0>, u64), String> {
+    ) -> std::result::Result<(Vec<Reply0>, Timing), String> {
+        let t_begin = Instant::now();
         let n = self.n;
         let nn = n * n * n;
         let b = leaves.len();
@@ -959,6 +998,7 @@ impl Device {
         };
         let mut submissions = 0u64;
         let mut sc: Vec<f32> = Vec::with_capacity(b * SLOTS);
+        let t_kernels = Instant::now();
         q.submit([encode(&plan.ops[..start_ops].iter().collect::<Vec<_>>())]);
         submissions += 1;
         read_back(&dev, &read_scal, scal_bytes, &mut sc)?;
@@ -980,6 +1020,7 @@ impl Device {
             }
         }
         // The solutions.
+        let t_read = Instant::now();
         let x_bytes = (b * nn * 4) as u64;
         let read_x = ensure(
             &dev,
@@ -1007,11 +1048,25 @@ impl Device {
                 (x, conv)
             })
             .collect();
-        Ok((out, submissions))
+        let timing = Timing {
+            submissions,
+            upload_s: (t_kernels - t_begin).as_secs_f64(),
+            kernel_s: (t_read - t_kernels).as_secs_f64(),
+            read_s: t_read.elapsed().as_secs_f64(),
+        };
+        Ok((out, timing))
     }
 }
 
 type Reply0 = (Vec<f32>, Convergence);
+
+/// Where one batch's time went on the device thread.
+struct Timing {
+    submissions: u64,
+    upload_s: f64,
+    kernel_s: f64,
+    read_s: f64,
+}
 
 fn entry(binding: u32, buf: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
     wgpu::BindGroupEntry {

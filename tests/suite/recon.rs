@@ -701,6 +701,18 @@ fn same_mesh_for_any_thread_count_under_a_tight_budget() {
         meshes.push(std::fs::read(&out).unwrap());
     }
     assert!(meshes[0] == meshes[1], "the mesh depends on --threads");
+    // Under 2G the allocator follows the thread count (exec::alloc): mimalloc for 2 workers,
+    // glibc for 8; the budget, and so the mesh, does not.
+    use scanflow::exec::alloc::{reserve_bytes, slack_bytes};
+    assert!(slack_bytes(2) <= reserve_bytes(2 << 30) && slack_bytes(8) > reserve_bytes(2 << 30));
+    for t in ["2", "8"] {
+        let out = d.path().join(format!("a{t}.ply"));
+        recon(&ply, &out, &["--depth", "7", "--threads", t, "--mem", "2G"]);
+        assert!(
+            std::fs::read(&out).unwrap() == meshes[0],
+            "the mesh depends on the allocator ({t} threads under 2G)"
+        );
+    }
 }
 
 #[test]
