@@ -335,42 +335,6 @@ impl<'a> PointSource<'a> {
         out
     }
 
-    /// Call `f(cell, j)` for each point `j` of leaf-level cell `k` that lies in `bx`, in the
-    /// store's order (a summed cell's are visited by [`PointSource::visit_voxels`]).
-    fn visit(
-        &mut self,
-        k: CellKey,
-        bx: &Aabb,
-        mut f: impl FnMut(&SortedCell, usize),
-    ) -> Result<()> {
-        for si in self.covering(k) {
-            let sc = self.cell(si)?;
-            for j in sc.points_of(k) {
-                if bx.contains(sc.pos[j]) {
-                    f(&sc, j);
-                }
-            }
-        }
-        Ok(())
-    }
-
-    /// Call `f(sum)` for each voxel sum of leaf-level cell `k` (in its summed store cells)
-    /// whose voxel lies in `bx`, a box whose faces are on the plan's lattice: a voxel lies in
-    /// it or out of it, and its centre says which.
-    fn visit_voxels(&mut self, k: CellKey, bx: &Aabb, mut f: impl FnMut(&VoxelSum)) -> Result<()> {
-        let (origin, h) = (self.plan.cube.origin, self.plan.spacing);
-        for si in self.covering(k) {
-            let sc = self.cell(si)?;
-            for v in sc.voxels_of(k) {
-                let c = [0, 1, 2].map(|a| origin[a] + (v.at[a] as f64 + 0.5) * h);
-                if bx.contains(c) {
-                    f(v);
-                }
-            }
-        }
-        Ok(())
-    }
-
     /// The store cells [`PointSource::near_points`] reads first for the box `lo..hi` and
     /// `margin`.
     pub fn cells_near(&self, lo: [f64; 3], hi: [f64; 3], margin: f64) -> Vec<usize> {
@@ -392,21 +356,19 @@ impl<'a> PointSource<'a> {
     /// The points (with their colours, when the store has them) within `margin` of the box
     /// `lo..hi` (world), widening the margin (doubling, up to 6 times) while none is found.
     pub fn near_points(&mut self, lo: [f64; 3], hi: [f64; 3], margin: f64) -> Result<NearPoints> {
-        let mut out = NearPoints::default();
-        let mut m = margin;
-        for _ in 0..=NEAR_POINTS_WIDENINGS {
-            let bx = Aabb { min: lo, max: hi }.grown(m);
-            for k in self.keys_in(&bx) {
-                self.visit(k, &bx, |sc, j| take(&mut out, sc, j))?;
-            }
-            out.lo = bx.min;
-            out.hi = bx.max;
-            if !out.pos.is_empty() {
-                break;
-            }
-            m *= 2.0;
-        }
-        Ok(out)
+        let got = Access::Load(self).near_points(lo, hi, margin)?;
+        Ok(got.expect("a loading read finds every cell"))
+    }
+
+    /// [`PointSource::near_points`] from the cached cells alone, shareable between workers:
+    /// `None` where it needs a cell that is not cached.
+    pub fn near_points_cached(
+        &self,
+        lo: [f64; 3],
+        hi: [f64; 3],
+        margin: f64,
+    ) -> Result<Option<NearPoints>> {
+        Access::Cached(self).near_points(lo, hi, margin)
     }
 
     /// The points (with their colours) within Euclidean distance `reach` of the box `lo..hi`
@@ -419,8 +381,9 @@ impl<'a> PointSource<'a> {
         let inner = Aabb { min: lo, max: hi };
         let bx = inner.grown(reach);
         let r2 = reach * reach;
-        for k in self.keys_in(&bx) {
-            self.visit(k, &bx, |sc, j| {
+        let mut acc = Access::Load(self);
+        for k in acc.src().keys_in(&bx) {
+            acc.visit(k, &bx, |sc, j| {
                 if inner.dist2(sc.pos[j]) <= r2 {
                     take(&mut out, sc, j);
                 }
@@ -434,24 +397,133 @@ impl<'a> PointSource<'a> {
     /// The points of leaf `key`'s 1.8125× box, and how many of them (the first ones) lie in the
     /// cell itself.
     pub fn gather(&mut self, key: CellKey) -> Result<LeafPoints> {
-        let cell_box = self.plan.cube.cell_box(key);
+        let got = Access::Load(self).gather(key)?;
+        Ok(got.expect("a loading read finds every cell"))
+    }
+
+    /// [`PointSource::gather`] from the cached cells alone, shareable between workers: `None`
+    /// where it needs a cell that is not cached.
+    pub fn gather_cached(&self, key: CellKey) -> Result<Option<LeafPoints>> {
+        Access::Cached(self).gather(key)
+    }
+}
+
+/// How a read reaches the store cells: loading what the cache lacks (and caching it), or
+/// from the cache alone, so that workers can read at once after a wave's
+/// [`PointSource::preload`]. Both visit the same cells in the same order: the same points.
+enum Access<'s, 'a> {
+    Load(&'s mut PointSource<'a>),
+    Cached(&'s PointSource<'a>),
+}
+
+impl<'a> Access<'_, 'a> {
+    fn src(&self) -> &PointSource<'a> {
+        match self {
+            Access::Load(s) => s,
+            Access::Cached(s) => s,
+        }
+    }
+
+    /// Store cell `i`, or `None` where it is not cached and this read does not load.
+    fn cell(&mut self, i: usize) -> Result<Option<Arc<SortedCell>>> {
+        match self {
+            Access::Load(s) => s.cell(i).map(Some),
+            Access::Cached(s) => Ok(s.cache.peek(&i).cloned()),
+        }
+    }
+
+    /// Call `f(cell, j)` for each point `j` of leaf-level cell `k` that lies in `bx`, in the
+    /// store's order (a summed cell's are visited by [`Access::visit_voxels`]). `false`
+    /// where a cell was not at hand.
+    fn visit(
+        &mut self,
+        k: CellKey,
+        bx: &Aabb,
+        mut f: impl FnMut(&SortedCell, usize),
+    ) -> Result<bool> {
+        for si in self.src().covering(k) {
+            let Some(sc) = self.cell(si)? else {
+                return Ok(false);
+            };
+            for j in sc.points_of(k) {
+                if bx.contains(sc.pos[j]) {
+                    f(&sc, j);
+                }
+            }
+        }
+        Ok(true)
+    }
+
+    /// Call `f(sum)` for each voxel sum of leaf-level cell `k` (in its summed store cells)
+    /// whose voxel lies in `bx`, a box whose faces are on the plan's lattice: a voxel lies in
+    /// it or out of it, and its centre says which. `false` where a cell was not at hand.
+    fn visit_voxels(
+        &mut self,
+        k: CellKey,
+        bx: &Aabb,
+        mut f: impl FnMut(&VoxelSum),
+    ) -> Result<bool> {
+        let (origin, h) = (self.src().plan.cube.origin, self.src().plan.spacing);
+        for si in self.src().covering(k) {
+            let Some(sc) = self.cell(si)? else {
+                return Ok(false);
+            };
+            for v in sc.voxels_of(k) {
+                let c = [0, 1, 2].map(|a| origin[a] + (v.at[a] as f64 + 0.5) * h);
+                if bx.contains(c) {
+                    f(v);
+                }
+            }
+        }
+        Ok(true)
+    }
+
+    fn near_points(
+        &mut self,
+        lo: [f64; 3],
+        hi: [f64; 3],
+        margin: f64,
+    ) -> Result<Option<NearPoints>> {
+        let mut out = NearPoints::default();
+        let mut m = margin;
+        for _ in 0..=NEAR_POINTS_WIDENINGS {
+            let bx = Aabb { min: lo, max: hi }.grown(m);
+            for k in self.src().keys_in(&bx) {
+                if !self.visit(k, &bx, |sc, j| take(&mut out, sc, j))? {
+                    return Ok(None);
+                }
+            }
+            out.lo = bx.min;
+            out.hi = bx.max;
+            if !out.pos.is_empty() {
+                break;
+            }
+            m *= 2.0;
+        }
+        Ok(Some(out))
+    }
+
+    fn gather(&mut self, key: CellKey) -> Result<Option<LeafPoints>> {
+        let cell_box = self.src().plan.cube.cell_box(key);
         let reach = cell_box.grown(LEAF_REACH * (cell_box.max[0] - cell_box.min[0]));
         let mut own = LeafPoints::default();
         let mut rest = LeafPoints::default();
-        for nk in Self::neighbours(key) {
+        for nk in PointSource::neighbours(key) {
             let dst = if nk == key { &mut own } else { &mut rest };
-            self.visit(nk, &reach, |sc, j| {
+            let found = self.visit(nk, &reach, |sc, j| {
                 dst.pos.push(sc.pos[j]);
                 dst.nrm.push(sc.nrm[j]);
-            })?;
-            self.visit_voxels(nk, &reach, |v| dst.voxels.push(*v))?;
+            })? && self.visit_voxels(nk, &reach, |v| dst.voxels.push(*v))?;
+            if !found {
+                return Ok(None);
+            }
         }
         own.own = own.pos.len();
         own.own_voxels = own.voxels.len();
         own.pos.extend(rest.pos);
         own.nrm.extend(rest.nrm);
         own.voxels.extend(rest.voxels);
-        Ok(own)
+        Ok(Some(own))
     }
 }
 
