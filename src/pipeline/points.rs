@@ -26,7 +26,7 @@ const SORTED_COLOUR_BYTES: u64 = 8;
 const SORTED_INTENSITY_BYTES: u64 = 4;
 /// Bytes of a leaf range of a sorted cell: key u64 and two usize bounds.
 const SORTED_RANGE_BYTES: u64 = 24;
-/// Times [`PointSource::near_points`] doubles its margin while it finds no point.
+/// Times [`PointSource::near_points_wave`] doubles its margin while it finds no point.
 const NEAR_POINTS_WIDENINGS: usize = 6;
 /// A leaf solves the points of its cell scaled by 1.8125 about its centre: 13/32 of the edge
 /// beyond each face. A binary fraction, so that the box's faces lie on the cube's lattice
@@ -335,7 +335,7 @@ impl<'a> PointSource<'a> {
         out
     }
 
-    /// The store cells [`PointSource::near_points`] reads first for the box `lo..hi` and
+    /// The store cells [`PointSource::near_points_wave`] reads first for the box `lo..hi` and
     /// `margin`.
     pub fn cells_near(&self, lo: [f64; 3], hi: [f64; 3], margin: f64) -> Vec<usize> {
         let bx = Aabb { min: lo, max: hi }.grown(margin);
@@ -345,7 +345,7 @@ impl<'a> PointSource<'a> {
             .collect()
     }
 
-    /// The store cells [`PointSource::gather`] reads for leaf `key`.
+    /// The store cells [`PointSource::gather_wave`] reads for leaf `key`.
     pub fn cells_for_leaf(&self, key: CellKey) -> Vec<usize> {
         Self::neighbours(key)
             .into_iter()
@@ -353,22 +353,18 @@ impl<'a> PointSource<'a> {
             .collect()
     }
 
-    /// The points (with their colours, when the store has them) within `margin` of the box
-    /// `lo..hi` (world), widening the margin (doubling, up to 6 times) while none is found.
-    pub fn near_points(&mut self, lo: [f64; 3], hi: [f64; 3], margin: f64) -> Result<NearPoints> {
-        let got = Access::Load(self).near_points(lo, hi, margin)?;
-        Ok(got.expect("a loading read finds every cell"))
-    }
-
-    /// [`PointSource::near_points`] from the cached cells alone, shareable between workers:
-    /// `None` where it needs a cell that is not cached.
-    pub fn near_points_cached(
-        &self,
-        lo: [f64; 3],
-        hi: [f64; 3],
-        margin: f64,
-    ) -> Result<Option<NearPoints>> {
-        Access::Cached(self).near_points(lo, hi, margin)
+    /// For each box `(lo, hi, margin)` of a wave, the points (with their colours, when the
+    /// store has them) within `margin` of the box `lo..hi` (world), widening the margin
+    /// (doubling, up to 6 times) while none is found; read by the workers of `pool`
+    /// ([`PointSource::read_wave`]).
+    pub fn near_points_wave(
+        &mut self,
+        pool: &rayon::ThreadPool,
+        boxes: &[([f64; 3], [f64; 3], f64)],
+    ) -> Result<Vec<NearPoints>> {
+        self.read_wave(pool, boxes, |acc, &(lo, hi, margin)| {
+            acc.near_points(lo, hi, margin)
+        })
     }
 
     /// The points (with their colours) within Euclidean distance `reach` of the box `lo..hi`
@@ -394,17 +390,48 @@ impl<'a> PointSource<'a> {
         Ok(out)
     }
 
-    /// The points of leaf `key`'s 1.8125× box, and how many of them (the first ones) lie in the
-    /// cell itself.
-    pub fn gather(&mut self, key: CellKey) -> Result<LeafPoints> {
-        let got = Access::Load(self).gather(key)?;
-        Ok(got.expect("a loading read finds every cell"))
+    /// For each leaf `key` of a wave, the points of its 1.8125× box, and how many of them (the
+    /// first ones) lie in the cell itself; read by the workers of `pool`
+    /// ([`PointSource::read_wave`]).
+    pub fn gather_wave(
+        &mut self,
+        pool: &rayon::ThreadPool,
+        keys: &[CellKey],
+    ) -> Result<Vec<LeafPoints>> {
+        self.read_wave(pool, keys, |acc, &key| acc.gather(key))
     }
 
-    /// [`PointSource::gather`] from the cached cells alone, shareable between workers: `None`
-    /// where it needs a cell that is not cached.
-    pub fn gather_cached(&self, key: CellKey) -> Result<Option<LeafPoints>> {
-        Access::Cached(self).gather(key)
+    /// `read` of every item of a wave, after its [`PointSource::preload`]: in parallel on
+    /// `pool` from the cache alone, then, in order, loading the cells for the items whose
+    /// cells the preload left out (over its share of the cache, or a margin widened past
+    /// them). Both read the same cells in the same order: the results of reading each item
+    /// in turn.
+    fn read_wave<I: Sync, T: Send>(
+        &mut self,
+        pool: &rayon::ThreadPool,
+        items: &[I],
+        read: impl Fn(&mut Access<'_, 'a>, &I) -> Result<Option<T>> + Sync,
+    ) -> Result<Vec<T>> {
+        let cached: Vec<Result<Option<T>>> = {
+            let shared: &PointSource<'a> = self;
+            pool.install(|| {
+                items
+                    .par_iter()
+                    .map(|item| read(&mut Access::Cached(shared), item))
+                    .collect()
+            })
+        };
+        items
+            .iter()
+            .zip(cached)
+            .map(|(item, got)| match got? {
+                Some(t) => Ok(t),
+                None => {
+                    Ok(read(&mut Access::Load(self), item)?
+                        .expect("a loading read finds every cell"))
+                }
+            })
+            .collect()
     }
 }
 

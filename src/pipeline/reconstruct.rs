@@ -867,23 +867,10 @@ fn leaf_pass(
                 .flat_map(|&i| src.cells_for_leaf(leaves[i]))
                 .collect();
             src.preload(&wanted, &ctx.pool)?;
-            // The wave's gathers in parallel from the cache; a leaf whose cells the preload
-            // left out (over its share of the cache) reads them afterwards, in order.
-            let cached: Vec<Result<Option<crate::recon::leaf::LeafPoints>>> = {
-                let shared: &PointSource = src;
-                ctx.pool.install(|| {
-                    wave_idx
-                        .par_iter()
-                        .map(|&i| shared.gather_cached(leaves[i]))
-                        .collect()
-                })
-            };
+            let keys: Vec<CellKey> = wave_idx.iter().map(|&i| leaves[i]).collect();
+            let gathered = src.gather_wave(&ctx.pool, &keys)?;
             let mut todo = Vec::with_capacity(wave_idx.len());
-            for (&i, got) in wave_idx.iter().zip(cached) {
-                let p = match got? {
-                    Some(p) => p,
-                    None => src.gather(leaves[i])?,
-                };
+            for (&i, p) in wave_idx.iter().zip(gathered) {
                 let summed: u64 = p.voxels.iter().map(|v| v.count as u64).sum();
                 read.points += p.pos.len() as u64 + summed;
                 read.summed += summed;

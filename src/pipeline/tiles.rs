@@ -593,47 +593,27 @@ fn load_wave(
         .filter(|(_, done)| !**done)
         .map(|(w, _)| w)
         .collect();
-    if let Some(src) = points.as_ref() {
-        let mut src = lock(src)?;
-        let wanted: Vec<usize> = todo
-            .iter()
-            .flat_map(|(_, lo, _)| {
-                let (a, b, margin) = near_box(plan, *lo);
-                src.cells_near(a, b, margin)
-            })
-            .collect();
-        src.preload(&wanted, &ctx.pool)?;
-    }
-    let keys: Vec<CellKey> = todo.iter().flat_map(|w| w.2.iter().copied()).collect();
-    let held = details.load(&keys, &ctx.pool)?;
-    // The tiles' near points in parallel from the cache; a tile whose cells the preload left
-    // out (or whose margin widened past them) reads them afterwards, in order.
-    let mut near_todo: Vec<Option<NearPoints>> = Vec::with_capacity(todo.len());
-    if let Some(src) = points.as_ref() {
-        let mut src = lock(src)?;
-        let cached: Vec<Result<Option<NearPoints>>> = {
-            let shared: &PointSource = &src;
+    // The tiles' near points: their cells preloaded, then read by the workers.
+    let near_todo: Vec<NearPoints> = match points.as_ref() {
+        Some(src) => {
+            let boxes: Vec<_> = todo.iter().map(|(_, lo, _)| near_box(plan, *lo)).collect();
+            let mut src = lock(src)?;
+            let wanted: Vec<usize> = boxes
+                .iter()
+                .flat_map(|&(a, b, margin)| src.cells_near(a, b, margin))
+                .collect();
+            src.preload(&wanted, &ctx.pool)?;
+            let near = src.near_points_wave(&ctx.pool, &boxes)?;
             ctx.pool.install(|| {
-                todo.par_iter()
-                    .map(|(_, lo, _)| {
-                        let (a, b, margin) = near_box(plan, *lo);
-                        let got = shared.near_points_cached(a, b, margin)?;
-                        Ok(got.map(|p| to_local(p, plan.cube.origin)))
-                    })
+                near.into_par_iter()
+                    .map(|p| to_local(p, plan.cube.origin))
                     .collect()
             })
-        };
-        for ((_, lo, _), got) in todo.iter().zip(cached) {
-            let p = match got? {
-                Some(p) => p,
-                None => {
-                    let (a, b, margin) = near_box(plan, *lo);
-                    to_local(src.near_points(a, b, margin)?, plan.cube.origin)
-                }
-            };
-            near_todo.push(Some(p));
         }
-    }
+        None => Vec::new(),
+    };
+    let keys: Vec<CellKey> = todo.iter().flat_map(|w| w.2.iter().copied()).collect();
+    let held = details.load(&keys, &ctx.pool)?;
     let mut near_todo = near_todo.into_iter();
     let mut loaded = Vec::with_capacity(wave_tiles.len());
     let mut near_pts = Vec::with_capacity(wave_tiles.len());
@@ -643,7 +623,7 @@ fn load_wave(
             near_pts.push(None);
             continue;
         }
-        near_pts.push(near_todo.next().flatten());
+        near_pts.push(near_todo.next());
         let mut ds = Vec::with_capacity(near.len());
         for k in near {
             let d = held

@@ -220,7 +220,8 @@ pub struct GpuSolveStats {
     pub submissions: u64,
     /// Seconds the device thread spent on batches (uploads, kernels, read-backs).
     pub busy_s: f64,
-    /// Of `busy_s`: building the batch's lists and writing them to the device.
+    /// Of `busy_s`: building the batch's lists and dispatch plan and writing them to the
+    /// device.
     pub upload_s: f64,
     /// Of `busy_s`: the submissions, each waited for by reading the leaves' flags.
     pub kernel_s: f64,
@@ -667,7 +668,7 @@ impl Device {
         (gx as u32, g.div_ceil(gx) as u32)
     }
 
-    /// Solve a batch; returns each leaf's solution and convergence, and the submissions.
+    /// Solve a batch; returns each leaf's solution and convergence, and where the time went.
     fn run(
         &mut self,
         leaves: Vec<&Prepared>,

@@ -307,7 +307,7 @@ mod tests {
                 sample.push((!own, [v[2], v[1], v[0]], p, d.map(|v| v as f32)));
             }
         }
-        // Own first (as `PointSource::gather` hands them), then by voxel.
+        // Own first (as `PointSource::gather_wave` hands them), then by voxel.
         sample.sort_by_key(|a| (a.0, a.1));
         let own = sample.iter().filter(|s| !s.0).count();
         let pos: Vec<[f64; 3]> = sample.iter().map(|s| s.2).collect();
