@@ -354,7 +354,7 @@ pub fn reconstruct(
     let m = &store.manifest;
     let (with_color, with_intensity) = (m.attributes.color, m.attributes.intensity);
     let points = (with_color || with_intensity || params.fit || params.measures_density())
-        .then(|| Mutex::new(src));
+        .then(|| Mutex::new(src.for_positions()));
     let job = TileJob {
         plan: &plan,
         params,

@@ -105,25 +105,24 @@ impl LocalGrid {
     #[inline]
     pub fn eval(&self, v: &[f32], p: [f64; 3]) -> f64 {
         let n = self.n as i64;
-        let mut i0 = [0i64; 3];
+        // Per axis the two wrapped node indices (a division each, not one per corner) and
+        // the offset.
+        let mut at = [[0usize; 2]; 3];
         let mut f = [0f64; 3];
         for a in 0..3 {
             let u = (p[a] - self.origin[a]) / self.h;
             let fl = floor(u);
-            i0[a] = fl as i64;
+            let i0 = fl as i64;
+            at[a] = [i0.rem_euclid(n) as usize, (i0 + 1).rem_euclid(n) as usize];
             f[a] = u - fl;
         }
-        let idx = |x: i64, y: i64, z: i64| {
-            let w = |c: i64| c.rem_euclid(n) as usize;
-            (w(z) * self.n + w(y)) * self.n + w(x)
-        };
         let mut acc = 0.0;
         for c in 0..8 {
             let (dx, dy, dz) = (c & 1, (c >> 1) & 1, (c >> 2) & 1);
             let w = (if dx == 1 { f[0] } else { 1.0 - f[0] })
                 * (if dy == 1 { f[1] } else { 1.0 - f[1] })
                 * (if dz == 1 { f[2] } else { 1.0 - f[2] });
-            acc += w * v[idx(i0[0] + dx, i0[1] + dy, i0[2] + dz)] as f64;
+            acc += w * v[(at[2][dz] * self.n + at[1][dy]) * self.n + at[0][dx]] as f64;
         }
         acc
     }

@@ -56,11 +56,12 @@ impl LeafPoints {
 
     /// The screening of the samples on `grid` (placed by `on`) with weight `alpha`.
     fn screen(&self, grid: &LocalGrid, on: OnLattice, alpha: f64) -> Screen {
-        let mut b = ScreenBuilder::new(grid);
-        if alpha > 0.0 {
-            b.add(&self.pos);
-            b.add_voxels(on, &self.voxels);
+        if alpha <= 0.0 {
+            return ScreenBuilder::new(grid).finish(alpha);
         }
+        let mut b = ScreenBuilder::dense(grid);
+        b.add(&self.pos);
+        b.add_voxels(on, &self.voxels);
         b.finish(alpha)
     }
 

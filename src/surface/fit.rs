@@ -4,6 +4,8 @@
 
 use super::colour::{COLOUR_NEIGHBOURS, blend_colour};
 use super::point_grid::PointGrid;
+use crate::geom::frame::plane_basis;
+use crate::normals::estimate::least_eigenvector;
 use crate::types::{EdgeKey, GridGeom};
 
 /// Input points whose plane a vertex is moved onto (`fit`).
@@ -341,17 +343,36 @@ impl Plane {
             let d = nalgebra::Vector3::new(p[0] - c[0], p[1] - c[1], p[2] - c[2]);
             m += d * d.transpose();
         }
-        let e = m.symmetric_eigen();
-        let i = e.eigenvalues.imin();
-        let col = |j: usize| {
-            let v = e.eigenvectors.column(j);
-            [v[0], v[1], v[2]]
+        // The normal in closed form (a tenth of the tile stage's time went to the iterative
+        // solver at 100M points); the iterative one where the points make a line or a blob.
+        let (n, t) = match least_eigenvector(&m) {
+            Some(v) => {
+                let n = [v[0], v[1], v[2]];
+                let (t0, t1) = plane_basis(n);
+                (n, [t0, t1])
+            }
+            None => {
+                let e = m.symmetric_eigen();
+                let i = e.eigenvalues.imin();
+                let col = |j: usize| {
+                    let v = e.eigenvectors.column(j);
+                    [v[0], v[1], v[2]]
+                };
+                (col(i), [col((i + 1) % 3), col((i + 2) % 3)])
+            }
         };
-        let rss_plane = e.eigenvalues[i].max(0.0);
+        // The least eigenvalue, as the squared distances to the plane it stands for.
+        let rss_plane: f64 = nb
+            .iter()
+            .map(|(_, p, _, _)| {
+                let z = (0..3).map(|a| (p[a] - c[a]) * n[a]).sum::<f64>();
+                z * z
+            })
+            .sum();
         let mut plane = Plane {
             c,
-            n: col(i),
-            t: [col((i + 1) % 3), col((i + 2) % 3)],
+            n,
+            t,
             q: [0.0; 6],
             se: rss_plane.sqrt() / k,
             sd: (rss_plane / (k - 3.0).max(1.0)).sqrt(),
