@@ -20,7 +20,10 @@ use crate::error::{Error, Result};
 use crate::exec::Ctx;
 use crate::exec::budget::{Permit, Share};
 use crate::io::mesh_write::MeshTarget;
-use crate::recon::checkpoint::{LeafSummary, leaf_path, read_leaf_summary, write_leaf};
+use crate::recon::checkpoint::{
+    CoarseCheckpoint, LeafSummary, coarse_path, leaf_path, read_coarse, read_leaf_summary,
+    write_coarse, write_leaf,
+};
 use crate::recon::density::DensityGrid;
 use crate::recon::pou::unit_for;
 use crate::recon::{
@@ -285,7 +288,7 @@ pub fn reconstruct(
     let mut levels = plan_run(store, params, ctx)?;
     let dirs = workdir::prepare(store, &levels, params)?;
     let top = *levels.last().expect("a plan has a level");
-    let coarse = coarse_pass(store, &levels[0], &top, params.point_weight, ctx)?;
+    let coarse = coarse_or_checkpoint(store, &levels[0], &top, params, &dirs, ctx)?;
     // The weight the coarse solve used, for every leaf (`auto` measures it there).
     for p in &mut levels {
         p.point_weight = coarse.point_weight;
@@ -762,6 +765,84 @@ fn coarse_pass(
         point_weight,
         noise,
     })
+}
+
+/// The coarse pass ([`coarse_pass`]) checkpointed in the work directory; or, where a resumed
+/// run's predecessor or another shard left that checkpoint, its results read back, bit for
+/// bit what the pass gives (the checkpoint lives beside the leaves', so it is dropped with
+/// them when the plan changes). A shard that starts after another finished the pass, a
+/// requeued task and a resumed run so skip the two reads of every point.
+fn coarse_or_checkpoint(
+    store: &Store,
+    fine: &Plan,
+    plan: &Plan,
+    params: &ReconParams,
+    dirs: &WorkDir,
+    ctx: &Ctx,
+) -> Result<CoarsePass> {
+    let path = coarse_path(&dirs.leaves);
+    let reuse = params.resume || params.shard.is_split();
+    if let Some(c) = reuse.then(|| read_coarse(&path)).transpose()?.flatten() {
+        let bad = |what: &str| {
+            Error::input(
+                &path,
+                format!("corrupt coarse checkpoint: {what} does not fit the plan"),
+            )
+        };
+        let permit = ctx.budget.acquire_now(
+            plan.coarse_field_bytes() + plan.density_bytes(),
+            "the coarse solution and the sampling density",
+        )?;
+        if c.field.len() as u64 != plan.coarse_nodes.pow(3) {
+            return Err(bad("the coarse solution"));
+        }
+        let density =
+            DensityGrid::with_counts(&plan.cube, plan.coarse_cells(), c.density.into_owned())
+                .ok_or_else(|| bad("the sampling density"))?;
+        let support = Support::with_bits(
+            [0.0; 3],
+            plan.coarse_spacing(),
+            plan.coarse_cells(),
+            c.support.into_owned(),
+        )
+        .ok_or_else(|| bad("the support"))?;
+        if c.occupied.iter().any(|k| k.level() != fine.leaf_level) {
+            return Err(bad("an occupied leaf"));
+        }
+        log::info!(
+            "{}: the coarse pass's results read back ({} occupied leaves)",
+            path.display(),
+            c.occupied.len()
+        );
+        return Ok(CoarsePass {
+            field: CoarseField::new(plan, c.field.into_owned()),
+            density: Arc::new(density),
+            _permit: permit,
+            occupied: c.occupied.into_iter().collect(),
+            support,
+            iterations: c.iterations,
+            point_weight: c.point_weight,
+            noise: c.noise,
+        });
+    }
+    let c = coarse_pass(store, fine, plan, params.point_weight, ctx)?;
+    let field = c
+        .field
+        .dense_values()
+        .ok_or_else(|| Error::Internal("the coarse pass gave a level's field".into()))?;
+    write_coarse(
+        &path,
+        &CoarseCheckpoint {
+            iterations: c.iterations,
+            point_weight: c.point_weight,
+            noise: c.noise,
+            field: field.into(),
+            density: c.density.counts().into(),
+            support: c.support.bits().into(),
+            occupied: c.occupied.iter().copied().collect(),
+        },
+    )?;
+    Ok(c)
 }
 
 /// Bytes a leaf of `plan` reads of one level above it ([`CoarseField::local`]): the details

@@ -1,10 +1,14 @@
-//! The work directory's checkpoint formats: a leaf's detail (`SFLEAF03`) and a tile's mesh
-//! (`SFTILE07`, positions relative to the cube's lower corner), both zstd-compressed little-endian records written atomically, so that a
-//! killed run leaves each file whole or absent and a resumed run reuses what it finds.
+//! The work directory's checkpoint formats: the coarse pass's results (`SFCOARS1`), a leaf's
+//! detail (`SFLEAF03`) and a tile's mesh (`SFTILE07`, positions relative to the cube's lower
+//! corner), all zstd-compressed little-endian records written atomically, so that a killed
+//! run leaves each file whole or absent and a resumed run reuses what it finds.
 
+use std::borrow::Cow;
+use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use super::leaf::LeafDetail;
+use super::screen::{JetStats, NoiseStats};
 use crate::error::{Error, IoContext, Result};
 use crate::io::atomic::{self, Durability};
 use crate::types::{CellKey, Detail, EdgeKey, MAX_SHIFT, TileMesh};
@@ -291,10 +295,214 @@ pub fn read_tile(path: &Path) -> Result<TileMesh> {
     Ok(m)
 }
 
+/// The coarse pass's checkpoint: this magic, the coarse solve's iterations (u32) and the
+/// run's screening weight (f64), the noise statistics (the within-voxel sums, then both
+/// jets' sums, degrees of freedom and fits), then four arrays each after its length (u64):
+/// the coarse solution (f32), the sampling density's counts (u32), the support's bits (u64)
+/// and the occupied leaf cells' keys (u64).
+const COARSE_MAGIC: &[u8; 8] = b"SFCOARS1";
+
+/// The coarse pass's results, as a checkpoint holds them: the grids borrowed when written,
+/// owned when read back.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CoarseCheckpoint<'a> {
+    /// Conjugate-gradient iterations of the coarse solve.
+    pub iterations: u32,
+    /// The screening weight the run settled on.
+    pub point_weight: f64,
+    /// The samples' noise.
+    pub noise: NoiseStats,
+    /// The coarse solution's node values.
+    pub field: Cow<'a, [f32]>,
+    /// The sampling density's counts.
+    pub density: Cow<'a, [u32]>,
+    /// The coarse voxels holding points, as bits.
+    pub support: Cow<'a, [u64]>,
+    /// The finest level's occupied leaf cells, in Morton order.
+    pub occupied: Vec<CellKey>,
+}
+
+/// The coarse pass's checkpoint in the leaf checkpoints' directory `dir`: removed with them
+/// when the plan changes, reused when they are.
+pub fn coarse_path(dir: &Path) -> PathBuf {
+    dir.join("coarse.zst")
+}
+
+/// Checkpoint the coarse pass's results `c` at `path`, compressed as they are written (no
+/// copy of the grids beside them).
+pub fn write_coarse(path: &Path, c: &CoarseCheckpoint) -> Result<()> {
+    let zerr = |e: std::io::Error| Error::Internal(format!("zstd compression failed: {e}"));
+    let mut z = zstd::stream::Encoder::new(Vec::new(), ZSTD_LEVEL).map_err(zerr)?;
+    let mut put = |b: &[u8]| z.write_all(b).map_err(zerr);
+    put(COARSE_MAGIC)?;
+    put(&c.iterations.to_le_bytes())?;
+    put(&c.point_weight.to_le_bytes())?;
+    put(&c.noise.sum_sq.to_le_bytes())?;
+    put(&c.noise.dof.to_le_bytes())?;
+    for j in &c.noise.jets {
+        put(&j.sum_sq.to_le_bytes())?;
+        put(&j.dof.to_le_bytes())?;
+        put(&j.fits.to_le_bytes())?;
+    }
+    put(&(c.field.len() as u64).to_le_bytes())?;
+    for v in c.field.iter() {
+        put(&v.to_le_bytes())?;
+    }
+    put(&(c.density.len() as u64).to_le_bytes())?;
+    for v in c.density.iter() {
+        put(&v.to_le_bytes())?;
+    }
+    put(&(c.support.len() as u64).to_le_bytes())?;
+    for v in c.support.iter() {
+        put(&v.to_le_bytes())?;
+    }
+    put(&(c.occupied.len() as u64).to_le_bytes())?;
+    for k in &c.occupied {
+        put(&k.0.to_le_bytes())?;
+    }
+    let z = z.finish().map_err(zerr)?;
+    atomic::write(path, &z, Durability::Renamed)
+}
+
+/// Read back the coarse checkpoint at `path` ([`write_coarse`]); `None` when there is none.
+pub fn read_coarse(path: &Path) -> Result<Option<CoarseCheckpoint<'static>>> {
+    let z = match std::fs::read(path) {
+        Ok(z) => z,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => return Err(Error::io(path, e)),
+    };
+    let bad = |what: &str| Error::input(path, format!("corrupt coarse checkpoint: {what}"));
+    let raw = zstd::stream::decode_all(&z[..]).map_err(|e| bad(&e.to_string()))?;
+    if raw.len() < 8 || &raw[..8] != COARSE_MAGIC {
+        return Err(bad("wrong magic"));
+    }
+    let mut r = Reader { raw: &raw, at: 8 };
+    let short = || bad("cut short");
+    let iterations = r.u32().ok_or_else(short)?;
+    let point_weight = f64::from_bits(r.u64().ok_or_else(short)?);
+    let mut noise = NoiseStats {
+        sum_sq: f64::from_bits(r.u64().ok_or_else(short)?),
+        dof: r.u64().ok_or_else(short)?,
+        jets: [JetStats::default(); 2],
+    };
+    for j in &mut noise.jets {
+        j.sum_sq = f64::from_bits(r.u64().ok_or_else(short)?);
+        j.dof = r.u64().ok_or_else(short)?;
+        j.fits = r.u64().ok_or_else(short)?;
+    }
+    let field = r.array(4).ok_or_else(short)?;
+    let field: Vec<f32> = field
+        .chunks_exact(4)
+        .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+        .collect();
+    let density = r.array(4).ok_or_else(short)?;
+    let density: Vec<u32> = density
+        .chunks_exact(4)
+        .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+        .collect();
+    let u64s = |b: &[u8]| -> Vec<u64> {
+        b.chunks_exact(8)
+            .map(|b| u64::from_le_bytes(b.try_into().expect("chunks of 8")))
+            .collect()
+    };
+    let support = u64s(r.array(8).ok_or_else(short)?);
+    let occupied = u64s(r.array(8).ok_or_else(short)?)
+        .into_iter()
+        .map(CellKey)
+        .collect();
+    if r.at != raw.len() {
+        return Err(bad("bytes after the end"));
+    }
+    Ok(Some(CoarseCheckpoint {
+        iterations,
+        point_weight,
+        noise,
+        field: Cow::Owned(field),
+        density: Cow::Owned(density),
+        support: Cow::Owned(support),
+        occupied,
+    }))
+}
+
+/// Little-endian values read in turn from a checkpoint's bytes; `None` past the end.
+struct Reader<'a> {
+    raw: &'a [u8],
+    at: usize,
+}
+
+impl<'a> Reader<'a> {
+    fn take(&mut self, n: usize) -> Option<&'a [u8]> {
+        let end = self.at.checked_add(n).filter(|&e| e <= self.raw.len())?;
+        let b = &self.raw[self.at..end];
+        self.at = end;
+        Some(b)
+    }
+
+    fn u32(&mut self) -> Option<u32> {
+        self.take(4)
+            .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+    }
+
+    fn u64(&mut self) -> Option<u64> {
+        self.take(8)
+            .map(|b| u64::from_le_bytes(b.try_into().expect("8 bytes")))
+    }
+
+    /// An array of values of `size` bytes after its length (u64).
+    fn array(&mut self, size: usize) -> Option<&'a [u8]> {
+        let n = usize::try_from(self.u64()?).ok()?;
+        self.take(n.checked_mul(size)?)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::recon::pou::quantise_detail;
+
+    #[test]
+    fn coarse_checkpoints_round_trip_and_bad_ones_are_named() {
+        let d = tempfile::tempdir().unwrap();
+        let path = coarse_path(d.path());
+        assert_eq!(read_coarse(&path).unwrap(), None);
+        let c = CoarseCheckpoint {
+            iterations: 7,
+            point_weight: 1.25,
+            noise: NoiseStats {
+                sum_sq: 3.5,
+                dof: 12,
+                jets: [
+                    JetStats {
+                        sum_sq: 0.5,
+                        dof: 40,
+                        fits: 3,
+                    },
+                    JetStats {
+                        sum_sq: 0.75,
+                        dof: 90,
+                        fits: 2,
+                    },
+                ],
+            },
+            field: Cow::Borrowed(&[1.0, -2.5, f32::MIN_POSITIVE]),
+            density: Cow::Borrowed(&[0, 256, 77]),
+            support: Cow::Borrowed(&[u64::MAX, 5]),
+            occupied: vec![CellKey::new(3, [1, 2, 3]), CellKey::new(3, [4, 0, 7])],
+        };
+        write_coarse(&path, &c).unwrap();
+        assert_eq!(read_coarse(&path).unwrap(), Some(c.clone()));
+        // Cut short, and a foreign file: errors naming the file.
+        let z = std::fs::read(&path).unwrap();
+        let raw = zstd::stream::decode_all(&z[..]).unwrap();
+        for cut in [&raw[..raw.len() - 3], &b"SFLEAF03xxxx"[..]] {
+            std::fs::write(&path, zstd::bulk::compress(cut, 1).unwrap()).unwrap();
+            let e = read_coarse(&path).unwrap_err().to_string();
+            assert!(
+                e.contains("coarse.zst") && e.contains("corrupt coarse checkpoint"),
+                "{e}"
+            );
+        }
+    }
 
     #[test]
     fn leaf_checkpoints_round_trip_and_bad_ones_are_named() {

@@ -243,6 +243,14 @@ impl CoarseField {
         }))
     }
 
+    /// The dense solve's node values (none for a level's field).
+    pub fn dense_values(&self) -> Option<&[f32]> {
+        match &self.kind {
+            Kind::Dense(d) => Some(&d.values),
+            Kind::Level(_) => None,
+        }
+    }
+
     /// The largest magnitude of a value of the dense solve (every level above shares its
     /// fixed-point unit).
     pub fn max_abs(&self) -> f64 {

@@ -165,6 +165,29 @@ impl DensityGrid {
         self.counts = counts;
     }
 
+    /// The counts (for a checkpoint).
+    pub fn counts(&self) -> &[u32] {
+        &self.counts
+    }
+
+    /// The grid over `cube` of `cells` voxels per edge holding `counts` (a checkpoint's),
+    /// finished; `None` when they are not that grid's.
+    pub fn with_counts(cube: &Cube, cells: u64, counts: Vec<u32>) -> Option<DensityGrid> {
+        let n = cells as usize + 1;
+        if counts.len() != n * n * n {
+            return None;
+        }
+        let mut g = DensityGrid {
+            origin: cube.origin,
+            inv_h: cells as f64 / cube.size,
+            n,
+            counts,
+            mean: 0.0,
+        };
+        g.finish();
+        Some(g)
+    }
+
     /// Compute `W̄` once every sample is splatted.
     pub fn finish(&mut self) {
         let (mut s1, mut s2) = (0u128, 0u128);

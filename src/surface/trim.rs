@@ -35,6 +35,22 @@ impl Support {
         ((c[2] * self.n + c[1]) * self.n + c[0]) as usize
     }
 
+    /// The bits, voxel `i` at bit `i % 64` of word `i / 64` (for a checkpoint).
+    pub fn bits(&self) -> &[u64] {
+        &self.bits
+    }
+
+    /// [`Support::new`] with the marks `bits` (a checkpoint's); `None` when they are not
+    /// that grid's.
+    pub fn with_bits(origin: [f64; 3], spacing: f64, n: u64, bits: Vec<u64>) -> Option<Support> {
+        (bits.len() == ((n * n * n) as usize).div_ceil(64)).then(|| Support {
+            origin,
+            inv_h: 1.0 / spacing,
+            n: n as i64,
+            bits,
+        })
+    }
+
     /// Mark the voxel of index `i` ([`Support::index`]).
     pub fn mark_index(&mut self, i: usize) {
         self.bits[i / 64] |= 1 << (i % 64);

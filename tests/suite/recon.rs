@@ -159,19 +159,57 @@ fn resume_gives_the_same_bytes() {
         &["--depth", "7", "--work-dir", s(&work), "--keep-work"],
     );
     std::fs::remove_file(&b).unwrap();
-    let out = recon(
-        &ply,
-        &b,
-        &["--depth", "7", "--work-dir", s(&work), "--resume"],
+    let o = run(&[
+        "reconstruct",
+        s(&ply),
+        "-o",
+        s(&b),
+        "--depth",
+        "7",
+        "--work-dir",
+        s(&work),
+        "--resume",
+        "--progress",
+        "json",
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(String::from_utf8_lossy(&o.stdout).contains("reconstructed"));
+    // The coarse pass's results come back from its checkpoint: no point is read for it.
+    assert!(
+        err.contains("the coarse pass's results read back")
+            && !err.contains("\"stage\":\"splat\"")
+            && !err.contains("\"stage\":\"density\""),
+        "{err}"
     );
-    assert!(out.contains("reconstructed"), "{out}");
     assert_eq!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap());
-    // Without --resume a used work dir is refused.
+    // A corrupt coarse checkpoint is an error naming it, not a wrong mesh.
     recon(
         &ply,
         &b,
         &["--depth", "7", "--work-dir", s(&work), "--keep-work"],
     );
+    let cp = work.join("leaves").join("coarse.zst");
+    let good = std::fs::read(&cp).unwrap();
+    std::fs::write(&cp, &good[..good.len() / 2]).unwrap();
+    let err = fails(&[
+        "reconstruct",
+        s(&ply),
+        "-o",
+        s(&b),
+        "--depth",
+        "7",
+        "--work-dir",
+        s(&work),
+        "--resume",
+        "--progress",
+        "none",
+    ]);
+    assert!(
+        err.contains("coarse.zst") && err.contains("corrupt coarse checkpoint"),
+        "{err}"
+    );
+    // Without --resume a used work dir is refused.
     let err = fails(&[
         "reconstruct",
         s(&ply),
