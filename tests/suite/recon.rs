@@ -159,19 +159,22 @@ fn resume_gives_the_same_bytes() {
         &["--depth", "7", "--work-dir", s(&work), "--keep-work"],
     );
     std::fs::remove_file(&b).unwrap();
-    let o = run(&[
-        "reconstruct",
-        s(&ply),
-        "-o",
-        s(&b),
-        "--depth",
-        "7",
-        "--work-dir",
-        s(&work),
-        "--resume",
-        "--progress",
-        "json",
-    ]);
+    let resumed = |progress| {
+        [
+            "reconstruct",
+            s(&ply),
+            "-o",
+            s(&b),
+            "--depth",
+            "7",
+            "--work-dir",
+            s(&work),
+            "--resume",
+            "--progress",
+            progress,
+        ]
+    };
+    let o = run(&resumed("json"));
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "{err}");
     assert!(String::from_utf8_lossy(&o.stdout).contains("reconstructed"));
@@ -192,19 +195,7 @@ fn resume_gives_the_same_bytes() {
     let cp = work.join("leaves").join("coarse.zst");
     let good = std::fs::read(&cp).unwrap();
     std::fs::write(&cp, &good[..good.len() / 2]).unwrap();
-    let err = fails(&[
-        "reconstruct",
-        s(&ply),
-        "-o",
-        s(&b),
-        "--depth",
-        "7",
-        "--work-dir",
-        s(&work),
-        "--resume",
-        "--progress",
-        "none",
-    ]);
+    let err = fails(&resumed("none"));
     assert!(
         err.contains("coarse.zst") && err.contains("corrupt coarse checkpoint"),
         "{err}"
