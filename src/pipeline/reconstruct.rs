@@ -115,6 +115,12 @@ impl ReconParams {
         self.min_points.max(by_density)
     }
 
+    /// Whether checkpoints found in the work directory are reused: by a resumed run, and by
+    /// every shard of a split run (another shard's work).
+    pub fn reuses_checkpoints(&self) -> bool {
+        self.resume || self.shard.is_split()
+    }
+
     /// Whether the vertices' sampling densities are measured (written or trimmed by).
     pub fn measures_density(&self) -> bool {
         self.density || self.trim_density.is_some()
@@ -781,8 +787,12 @@ fn coarse_or_checkpoint(
     ctx: &Ctx,
 ) -> Result<CoarsePass> {
     let path = coarse_path(&dirs.leaves);
-    let reuse = params.resume || params.shard.is_split();
-    if let Some(c) = reuse.then(|| read_coarse(&path)).transpose()?.flatten() {
+    let found = params
+        .reuses_checkpoints()
+        .then(|| read_coarse(&path))
+        .transpose()?
+        .flatten();
+    if let Some(c) = found {
         let bad = |what: &str| {
             Error::input(
                 &path,
@@ -910,7 +920,7 @@ fn leaf_pass(
         min_points: params.least_leaf_points(plan.leaf_voxels),
     };
     let solvers = LeafSolvers::new(plan).with_gpu(params.gpu_solve)?;
-    let reuse = params.resume || params.shard.is_split();
+    let reuse = params.reuses_checkpoints();
     let claims = Claims::new(&dirs.claims);
     let order = params.shard.order(leaves.len());
     let mut outcomes: Vec<Option<(f64, u64, bool)>> = vec![None; leaves.len()];

@@ -78,11 +78,17 @@ impl DensityGrid {
     /// An empty grid over `cube`, of `cells` voxels per edge.
     pub fn new(cube: &Cube, cells: u64) -> DensityGrid {
         let n = cells as usize + 1;
+        DensityGrid::of_counts(cube, cells, vec![0; n * n * n])
+    }
+
+    /// The grid over `cube` of `cells` voxels per edge holding `counts` (of its length),
+    /// not finished.
+    fn of_counts(cube: &Cube, cells: u64, counts: Vec<u32>) -> DensityGrid {
         DensityGrid {
             origin: cube.origin,
             inv_h: cells as f64 / cube.size,
-            n,
-            counts: vec![0; n * n * n],
+            n: cells as usize + 1,
+            counts,
             mean: 0.0,
         }
     }
@@ -177,13 +183,7 @@ impl DensityGrid {
         if counts.len() != n * n * n {
             return None;
         }
-        let mut g = DensityGrid {
-            origin: cube.origin,
-            inv_h: cells as f64 / cube.size,
-            n,
-            counts,
-            mean: 0.0,
-        };
+        let mut g = DensityGrid::of_counts(cube, cells, counts);
         g.finish();
         Some(g)
     }

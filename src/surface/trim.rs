@@ -15,13 +15,17 @@ impl Support {
     /// No voxel marked, on a grid of `n³` voxels of edge `spacing` from `origin` (the coarse
     /// voxels of the cube).
     pub fn new(origin: [f64; 3], spacing: f64, n: u64) -> Support {
-        let n = n as i64;
         Support {
             origin,
             inv_h: 1.0 / spacing,
-            n,
-            bits: vec![0u64; ((n * n * n) as usize).div_ceil(64)],
+            n: n as i64,
+            bits: vec![0u64; Support::words(n)],
         }
+    }
+
+    /// Words of bits a grid of `n³` voxels takes.
+    fn words(n: u64) -> usize {
+        ((n * n * n) as usize).div_ceil(64)
     }
 
     fn cell(&self, p: [f64; 3]) -> [i64; 3] {
@@ -43,7 +47,7 @@ impl Support {
     /// [`Support::new`] with the marks `bits` (a checkpoint's); `None` when they are not
     /// that grid's.
     pub fn with_bits(origin: [f64; 3], spacing: f64, n: u64, bits: Vec<u64>) -> Option<Support> {
-        (bits.len() == ((n * n * n) as usize).div_ceil(64)).then(|| Support {
+        (bits.len() == Support::words(n)).then(|| Support {
             origin,
             inv_h: 1.0 / spacing,
             n: n as i64,
