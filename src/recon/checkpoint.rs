@@ -11,6 +11,7 @@ use super::leaf::LeafDetail;
 use super::screen::{JetStats, NoiseStats};
 use crate::error::{Error, IoContext, Result};
 use crate::io::atomic::{self, Durability};
+use crate::io::le::LeReader;
 use crate::types::{CellKey, Detail, EdgeKey, MAX_SHIFT, TileMesh};
 
 /// zstd level of checkpoints: the fastest, since they are read back once.
@@ -295,11 +296,12 @@ pub fn read_tile(path: &Path) -> Result<TileMesh> {
     Ok(m)
 }
 
-/// The coarse pass's checkpoint: this magic, the coarse solve's iterations (u32) and the
-/// run's screening weight (f64), the noise statistics (the within-voxel sums, then both
-/// jets' sums, degrees of freedom and fits), then four arrays each after its length (u64):
-/// the coarse solution (f32), the sampling density's counts (u32), the support's bits (u64)
-/// and the occupied leaf cells' keys (u64).
+/// The coarse pass's checkpoint, a record of `io::le` (zstd-compressed): this magic, the
+/// coarse solve's iterations (u32) and the run's screening weight (f64), the noise
+/// statistics (the within-voxel sums, then both jets' sums, degrees of freedom and fits),
+/// then four arrays each after its length (u64): the coarse solution (f32), the sampling
+/// density's counts (u32), the support's bits (u64) and the occupied leaf cells' keys (u64);
+/// then the CRC-32 of all that.
 const COARSE_MAGIC: &[u8; 8] = b"SFCOARS1";
 
 /// The coarse pass's results, as a checkpoint holds them: the grids borrowed when written,
@@ -333,7 +335,12 @@ pub fn coarse_path(dir: &Path) -> PathBuf {
 pub fn write_coarse(path: &Path, c: &CoarseCheckpoint) -> Result<()> {
     let zerr = |e: std::io::Error| Error::Internal(format!("zstd compression failed: {e}"));
     let mut z = zstd::stream::Encoder::new(Vec::new(), ZSTD_LEVEL).map_err(zerr)?;
-    let mut put = |b: &[u8]| z.write_all(b).map_err(zerr);
+    // The record of `io::le`, its CRC-32 taken as the bytes stream through.
+    let mut crc = crc32fast::Hasher::new();
+    let mut put = |b: &[u8]| {
+        crc.update(b);
+        z.write_all(b).map_err(zerr)
+    };
     put(COARSE_MAGIC)?;
     put(&c.iterations.to_le_bytes())?;
     put(&c.point_weight.to_le_bytes())?;
@@ -360,6 +367,7 @@ pub fn write_coarse(path: &Path, c: &CoarseCheckpoint) -> Result<()> {
     for k in &c.occupied {
         put(&k.0.to_le_bytes())?;
     }
+    z.write_all(&crc.finalize().to_le_bytes()).map_err(zerr)?;
     let z = z.finish().map_err(zerr)?;
     atomic::write(path, &z, Durability::Renamed)
 }
@@ -373,44 +381,34 @@ pub fn read_coarse(path: &Path) -> Result<Option<CoarseCheckpoint<'static>>> {
     };
     let bad = |what: &str| Error::input(path, format!("corrupt coarse checkpoint: {what}"));
     let raw = zstd::stream::decode_all(&z[..]).map_err(|e| bad(&e.to_string()))?;
-    if raw.len() < 8 || &raw[..8] != COARSE_MAGIC {
-        return Err(bad("wrong magic"));
-    }
-    let mut r = Reader { raw: &raw, at: 8 };
+    let mut r = LeReader::open(&raw, COARSE_MAGIC)
+        .ok_or_else(|| bad("wrong magic or checksum (cut short, or not this format)"))?;
     let short = || bad("cut short");
     let iterations = r.u32().ok_or_else(short)?;
-    let point_weight = f64::from_bits(r.u64().ok_or_else(short)?);
+    let point_weight = r.f64().ok_or_else(short)?;
     let mut noise = NoiseStats {
-        sum_sq: f64::from_bits(r.u64().ok_or_else(short)?),
+        sum_sq: r.f64().ok_or_else(short)?,
         dof: r.u64().ok_or_else(short)?,
         jets: [JetStats::default(); 2],
     };
     for j in &mut noise.jets {
-        j.sum_sq = f64::from_bits(r.u64().ok_or_else(short)?);
+        j.sum_sq = r.f64().ok_or_else(short)?;
         j.dof = r.u64().ok_or_else(short)?;
         j.fits = r.u64().ok_or_else(short)?;
     }
-    let field = r.array(4).ok_or_else(short)?;
-    let field: Vec<f32> = field
-        .chunks_exact(4)
-        .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-        .collect();
-    let density = r.array(4).ok_or_else(short)?;
-    let density: Vec<u32> = density
-        .chunks_exact(4)
-        .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-        .collect();
-    let u64s = |b: &[u8]| -> Vec<u64> {
-        b.chunks_exact(8)
-            .map(|b| u64::from_le_bytes(b.try_into().expect("chunks of 8")))
-            .collect()
-    };
-    let support = u64s(r.array(8).ok_or_else(short)?);
-    let occupied = u64s(r.array(8).ok_or_else(short)?)
-        .into_iter()
-        .map(CellKey)
-        .collect();
-    if r.at != raw.len() {
+    // Each array after its length; a length past the record's end stops at its end.
+    fn array<'a, T>(
+        r: &mut LeReader<'a>,
+        mut next: impl FnMut(&mut LeReader<'a>) -> Option<T>,
+    ) -> Option<Vec<T>> {
+        let n = r.u64()?;
+        (0..n).map(|_| next(r)).collect()
+    }
+    let field = array(&mut r, LeReader::f32).ok_or_else(short)?;
+    let density = array(&mut r, LeReader::u32).ok_or_else(short)?;
+    let support = array(&mut r, LeReader::u64).ok_or_else(short)?;
+    let occupied = array(&mut r, |r| r.u64().map(CellKey)).ok_or_else(short)?;
+    if !r.at_end() {
         return Err(bad("bytes after the end"));
     }
     Ok(Some(CoarseCheckpoint {
@@ -422,37 +420,6 @@ pub fn read_coarse(path: &Path) -> Result<Option<CoarseCheckpoint<'static>>> {
         support: Cow::Owned(support),
         occupied,
     }))
-}
-
-/// Little-endian values read in turn from a checkpoint's bytes; `None` past the end.
-struct Reader<'a> {
-    raw: &'a [u8],
-    at: usize,
-}
-
-impl<'a> Reader<'a> {
-    fn take(&mut self, n: usize) -> Option<&'a [u8]> {
-        let end = self.at.checked_add(n).filter(|&e| e <= self.raw.len())?;
-        let b = &self.raw[self.at..end];
-        self.at = end;
-        Some(b)
-    }
-
-    fn u32(&mut self) -> Option<u32> {
-        self.take(4)
-            .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-    }
-
-    fn u64(&mut self) -> Option<u64> {
-        self.take(8)
-            .map(|b| u64::from_le_bytes(b.try_into().expect("8 bytes")))
-    }
-
-    /// An array of values of `size` bytes after its length (u64).
-    fn array(&mut self, size: usize) -> Option<&'a [u8]> {
-        let n = usize::try_from(self.u64()?).ok()?;
-        self.take(n.checked_mul(size)?)
-    }
 }
 
 #[cfg(test)]
@@ -491,10 +458,13 @@ mod tests {
         };
         write_coarse(&path, &c).unwrap();
         assert_eq!(read_coarse(&path).unwrap(), Some(c.clone()));
-        // Cut short, and a foreign file: errors naming the file.
+        // Cut short, a flipped bit in the density counts, and a foreign file: errors naming
+        // the file.
         let z = std::fs::read(&path).unwrap();
         let raw = zstd::stream::decode_all(&z[..]).unwrap();
-        for cut in [&raw[..raw.len() - 3], &b"SFLEAF03xxxx"[..]] {
+        let mut flipped = raw.clone();
+        flipped[8 + 4 + 8 + 16 + 48 + 8 + 12 + 8] ^= 1;
+        for cut in [&raw[..raw.len() - 3], &flipped[..], &b"SFLEAF03xxxx"[..]] {
             std::fs::write(&path, zstd::bulk::compress(cut, 1).unwrap()).unwrap();
             let e = read_coarse(&path).unwrap_err().to_string();
             assert!(
