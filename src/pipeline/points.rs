@@ -84,16 +84,18 @@ impl SortedCell {
         let shift = depth - leaf_level;
         let leaf = |v: [u32; 3]| CellKey::new(leaf_level, v.map(|c| c >> shift));
         // By leaf, then voxel (z, y, x; 21 bits each at the supported depths), then input
-        // order (the sort is stable).
-        let keys: Vec<(CellKey, u64)> = vox
+        // order: the index sorted with its key, not through it (whose scattered reads made
+        // the sort most of a level's read).
+        let mut keyed: Vec<(CellKey, u64, u32)> = vox
             .iter()
-            .map(|v| {
+            .zip(0..)
+            .map(|(v, i)| {
                 let packed = ((v[2] as u64) << 42) | ((v[1] as u64) << 21) | v[0] as u64;
-                (leaf(*v), packed)
+                (leaf(*v), packed, i)
             })
             .collect();
-        let mut order: Vec<u32> = (0..b.len() as u32).collect();
-        order.sort_by_key(|&i| keys[i as usize]);
+        keyed.sort_unstable();
+        let order: Vec<u32> = keyed.into_iter().map(|k| k.2).collect();
         let distinct = 1 + order
             .windows(2)
             .filter(|w| vox[w[0] as usize] != vox[w[1] as usize])

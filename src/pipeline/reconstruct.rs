@@ -660,7 +660,7 @@ fn coarse_pass(
     let mut screen = ScreenBuilder::with_slabs(&cgrid, ctx.threads());
     let mut screen_permit: Option<Permit> = None;
     let wave = 2 * ctx.threads();
-    let jet_stride = screen::jet_stride(m.point_count);
+    let noise_every = screen::noise_cell_stride(m.point_count);
     let ncells = m.cells.len();
     let mut i = 0;
     while i < ncells {
@@ -677,13 +677,11 @@ fn coarse_pass(
             ids.par_iter()
                 .map(|&j| {
                     let mut b = store.read_cell(j)?;
-                    let noise = NoiseStats::of(
-                        &b.pos,
-                        &b.normal,
-                        fine.cube.origin,
-                        fine.spacing,
-                        jet_stride,
-                    );
+                    let noise = if j % noise_every == 0 {
+                        NoiseStats::of(&b.pos, &b.normal, fine.cube.origin, fine.spacing)
+                    } else {
+                        NoiseStats::default()
+                    };
                     weigh_normals(&mut b, plan.confidence, &density);
                     let mut moments = Moments::new(m.bounds.min);
                     // A cell's points are near each other: runs of one voxel or leaf are

@@ -41,7 +41,7 @@ use rustfft::num_complex::Complex32;
 use rustfft::{Fft, FftPlanner};
 
 use super::screen::Screen;
-use crate::types::{floor, z_range};
+use crate::types::{floor, wrap, z_range};
 
 /// A periodic grid of `n` nodes per axis.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -88,13 +88,15 @@ impl LocalGrid {
 
     /// Bytes of scratch a solve needs at its peak: [`LocalGrid::scratch_bytes`], or with
     /// screening ([`Solver::solve_screened`]) the conjugate gradients' five vectors and the
-    /// preconditioner's transform, 28 bytes a node, when that is more.
+    /// preconditioner's transform, 28 bytes a node, with its multipliers beside the filter,
+    /// when that is more.
     pub fn solve_bytes(&self, screened: bool) -> u64 {
         let plain = self.scratch_bytes();
         if screened {
             let h1 = (self.n / 2 + 1) as u64;
             plain.max(
-                self.len() as u64 * crate::recon::plan::SCREENED_BYTES_PER_NODE + h1 * h1 * h1 * 4,
+                self.len() as u64 * crate::recon::plan::SCREENED_BYTES_PER_NODE
+                    + 2 * h1 * h1 * h1 * 4,
             )
         } else {
             plain
@@ -105,15 +107,14 @@ impl LocalGrid {
     #[inline]
     pub fn eval(&self, v: &[f32], p: [f64; 3]) -> f64 {
         let n = self.n as i64;
-        // Per axis the two wrapped node indices (a division each, not one per corner) and
-        // the offset.
+        // Per axis the two wrapped node indices (once, not per corner) and the offset.
         let mut at = [[0usize; 2]; 3];
         let mut f = [0f64; 3];
         for a in 0..3 {
             let u = (p[a] - self.origin[a]) / self.h;
             let fl = floor(u);
             let i0 = fl as i64;
-            at[a] = [i0.rem_euclid(n) as usize, (i0 + 1).rem_euclid(n) as usize];
+            at[a] = [wrap(i0, n) as usize, wrap(i0 + 1, n) as usize];
             f[a] = u - fl;
         }
         let mut acc = 0.0;
@@ -205,7 +206,7 @@ pub(crate) fn splat_node(
         let fl = floor(u[a]);
         let i0 = fl as i64;
         let f = (u[a] - fl) as f32;
-        at[a] = [i0.rem_euclid(ni) as usize, (i0 + 1).rem_euclid(ni) as usize];
+        at[a] = [wrap(i0, ni) as usize, wrap(i0 + 1, ni) as usize];
         w[a] = [1.0 - f, f];
         if a == 2 && at[2].iter().all(|&z| z < z0 || z >= z1) {
             return;
@@ -283,7 +284,8 @@ pub struct Solver {
     c2r: Arc<dyn ComplexToReal<f32>>,
     fwd: Arc<dyn Fft<f32>>,
     inv: Arc<dyn Fft<f32>>,
-    /// `filter[(az·(n/2+1) + ay)·(n/2+1) + ax]` for folded indices `a = min(m, n − m)`.
+    /// `filter[(ay·(n/2+1) + ax)·(n/2+1) + az]` for folded indices `a = min(m, n − m)`: z
+    /// fastest, the order in which the transform's z rows meet it ([`Solver::spectral`]).
     filter: Vec<f32>,
     /// `|k|²` per axis by folded index (cube units): the Laplacian's symbol is their sum.
     k2: Vec<f32>,
@@ -317,7 +319,7 @@ impl Solver {
                     let kk = k2[x] + k2[y] + k2[z];
                     if kk != 0.0 {
                         let g = (-(0.5 * sigma * sigma * kk)).exp() / kk;
-                        filter[(z * h1 + y) * h1 + x] = -(g as f32);
+                        filter[(y * h1 + x) * h1 + z] = -(g as f32);
                     }
                 }
             }
@@ -373,10 +375,7 @@ impl Solver {
 
     /// Solve from the divergence of the splatted normals ([`Solver::divergence`]).
     pub fn solve_divergence(&self, div: &[f32]) -> Vec<f32> {
-        let h1 = self.n / 2 + 1;
-        self.spectral(div, true, |fz, fy, kx| {
-            self.filter[(fz * h1 + fy) * h1 + kx]
-        })
+        self.spectral(div, true, &self.filter)
     }
 
     /// The divergence of splatted normals `v` (consumed) by central differences, in cube
@@ -409,10 +408,22 @@ impl Solver {
         div
     }
 
+    /// Nodes per axis of the grids this solver solves.
+    pub fn n(&self) -> usize {
+        self.n
+    }
+
     /// What a solve on the device needs of this solver: the nodes per axis, `|k|²` by
-    /// folded index (`n/2 + 1` values) and the Poisson filter (`(n/2 + 1)³` values).
-    pub fn tables(&self) -> (usize, &[f32], &[f32]) {
-        (self.n, &self.k2, &self.filter)
+    /// folded index (`n/2 + 1` values) and the Poisson filter (`(n/2 + 1)³` values, at
+    /// `(az·(n/2+1) + ay)·(n/2+1) + ax`).
+    pub fn tables(&self) -> (usize, &[f32], Vec<f32>) {
+        let h1 = self.n / 2 + 1;
+        let mut filter = vec![0f32; h1 * h1 * h1];
+        for (i, f) in filter.iter_mut().enumerate() {
+            let (z, y, x) = (i / (h1 * h1), (i / h1) % h1, i % h1);
+            *f = self.filter[(y * h1 + x) * h1 + z];
+        }
+        (self.n, &self.k2, filter)
     }
 
     /// The screened solve (see [`super::screen`]): `(L + Sᵀ Γ S) χ = b + Sᵀ Γ c` by
@@ -476,9 +487,16 @@ impl Solver {
         let coef: Vec<f64> = gamma.iter().zip(&at).map(|(g, v)| -g * (v - c)).collect();
         screen.scatter_add(&coef, &mut r);
         let mu = (PRECONDITIONER_SHIFT * gsum / x.len() as f64) as f32;
+        // The preconditioner's multipliers, tabulated once a solve in the filter's order
+        // (a division per frequency of every transform was a twentieth of the leaf stage).
         let k2 = &self.k2;
-        let precondition =
-            |r: &[f32]| self.spectral(r, false, |fz, fy, kx| 1.0 / (k2[fz] + k2[fy] + k2[kx] + mu));
+        let h1 = n / 2 + 1;
+        let mut inverse = vec![0f32; h1 * h1 * h1];
+        for (i, m) in inverse.iter_mut().enumerate() {
+            let (fy, kx, fz) = (i / (h1 * h1), (i / h1) % h1, i % h1);
+            *m = 1.0 / (k2[fz] + k2[fy] + k2[kx] + mu);
+        }
+        let precondition = |r: &[f32]| self.spectral(r, false, &inverse);
         let mut z = precondition(&r);
         let mut p = z.clone();
         let mut lp: Vec<f32> = r.iter().zip(&z).map(|(r, z)| r - mu * z).collect();
@@ -528,13 +546,10 @@ impl Solver {
         )
     }
 
-    /// Multiply the spectrum of the real grid `input` (consumed) by `mul(|mz|, |my|, kx)`
-    /// (folded frequency indices: the multiplier must be even in each), zero the mean when
-    /// `zero_mean`, and transform back.
-    fn spectral<F>(&self, input: &[f32], zero_mean: bool, mul: F) -> Vec<f32>
-    where
-        F: Fn(usize, usize, usize) -> f32 + Sync,
-    {
+    /// Multiply the spectrum of the real grid `input` by `mul[(|my|·(n/2+1) + kx)·(n/2+1) +
+    /// |mz|]` (folded frequency indices, z fastest, as [`Solver`]'s filter), zero the mean
+    /// when `zero_mean`, and transform back.
+    fn spectral(&self, input: &[f32], zero_mean: bool, mul: &[f32]) -> Vec<f32> {
         let n = self.n;
         let len = n * n * n;
         let h1 = n / 2 + 1;
@@ -573,8 +588,14 @@ impl Solver {
                 self.fwd.process_with_scratch(block, s);
                 let fy = fold(y);
                 for (kx, row) in block.chunks_exact_mut(n).enumerate() {
-                    for (z, c) in row.iter_mut().enumerate() {
-                        *c *= mul(fold(z), fy, kx);
+                    // Row z takes the multiplier of |mz| = min(z, n − z).
+                    let m = &mul[(fy * h1 + kx) * h1..(fy * h1 + kx + 1) * h1];
+                    let (lo, hi) = row.split_at_mut(h1);
+                    for (c, &f) in lo.iter_mut().zip(m) {
+                        *c *= f;
+                    }
+                    for (c, &f) in hi.iter_mut().zip(m[1..=n - h1].iter().rev()) {
+                        *c *= f;
                     }
                 }
                 if y == 0 && zero_mean {

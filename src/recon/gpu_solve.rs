@@ -266,7 +266,7 @@ impl GpuSolver {
         if mode == GpuMode::Off {
             return Ok(None);
         }
-        let (n, _, _) = solver.tables();
+        let n = solver.n();
         if !n.is_power_of_two() || !(4..=MAX_N).contains(&n) {
             log::info!(
                 "leaf solves on the CPU: their grids of {n}³ nodes are not a power of two from 4 to {MAX_N}"
@@ -622,7 +622,7 @@ impl Device {
             c.push(a.sin() as f32);
         }
         c.extend_from_slice(k2);
-        c.extend_from_slice(filter);
+        c.extend_from_slice(&filter);
         let consts = ensure(
             &device,
             &mut None,

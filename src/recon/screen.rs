@@ -79,7 +79,7 @@ use rayon::prelude::*;
 use super::fft_solve::LocalGrid;
 use super::voxel_sum::{OnLattice, VoxelSum, screen_voxel};
 use crate::geom::{dot, plane_basis};
-use crate::types::{KeyMap, floor};
+use crate::types::{KeyMap, floor, wrap};
 
 /// The screening weight for samples of no known noise: PoissonRecon's default `--pointWeight`.
 pub const BASE_POINT_WEIGHT: f64 = 4.0;
@@ -214,25 +214,25 @@ pub const JET_RADII_VOXELS: [f64; 2] = [1.5, 3.0];
 pub const JET_HEIGHT_VOXELS: f64 = 6.0;
 
 /// A jet fit is centred on every this many occupied fine voxels of a batch (a store cell), in
-/// key order, or on more where that would leave the batch under [`JET_MIN_FITS`] fits; in a
-/// run of more than [`JET_FULL_RATE_POINTS`] points, on proportionally fewer
-/// ([`jet_stride`]). Its cost (perf, a 10M-point sphere with noise of 1.6 voxels at depth 10,
-/// 2 cores): all of [`NoiseStats::of`], the sort and the fits, is under 1 CPU-second, about
-/// 1% of the run.
+/// key order, or on more where that would leave the batch under [`JET_MIN_FITS`] fits. Its
+/// cost (perf, a 10M-point sphere with noise of 1.6 voxels at depth 10, 2 cores): all of
+/// [`NoiseStats::of`], the sort and the fits, is under 1 CPU-second, about 1% of the run.
 pub const JET_VOXELS_PER_FIT: usize = 64;
 
-/// Up to this many points a run fits a jet every [`JET_VOXELS_PER_FIT`] voxels. Beyond, the
-/// fits would grow with the points (and each with the samples on its disc) while the pooled
-/// residual, of tens of thousands of fits, is long since precise: a 100M-point sphere at
-/// depth 11 spent 60% of its coarse pass, some 17 s on 2 cores, in 190,000 jet fits.
-pub const JET_FULL_RATE_POINTS: u64 = 10_000_000;
+/// Up to this many points a run measures its noise on every store cell. Beyond, the
+/// statistics would grow with the points while the pooled figures, of millions of voxels and
+/// tens of thousands of fits, are long since precise: a 100M-point sphere at depth 11 spent
+/// 60% of its coarse pass, some 17 s on 2 cores, in 190,000 jet fits, and with the fits
+/// thinned, a sixth of it still sorting every point by voxel.
+pub const NOISE_FULL_RATE_POINTS: u64 = 10_000_000;
 
-/// The most voxels between jet fits in a run of `points` samples: [`JET_VOXELS_PER_FIT`],
-/// times the number of [`JET_FULL_RATE_POINTS`] the run holds (rounded up), so the fits stop
-/// growing past that many points. A function of the run alone (its point count), so every
-/// thread count, shard and resume reads the same statistics.
-pub fn jet_stride(points: u64) -> usize {
-    JET_VOXELS_PER_FIT * points.div_ceil(JET_FULL_RATE_POINTS).max(1) as usize
+/// Store cells apart whose noise a run of `points` samples measures ([`NoiseStats::of`] on
+/// cells `0, k, 2k, …` in store order): 1, or the number of [`NOISE_FULL_RATE_POINTS`] the
+/// run holds (rounded up), so the measured samples stop growing past that many points. A
+/// function of the run alone (its point count), so every thread count, shard and resume
+/// reads the same statistics.
+pub fn noise_cell_stride(points: u64) -> usize {
+    points.div_ceil(NOISE_FULL_RATE_POINTS).max(1) as usize
 }
 
 /// Fewest samples a jet fit takes (six unknowns).
@@ -241,15 +241,9 @@ pub const JET_MIN_SAMPLES: u64 = 16;
 impl NoiseStats {
     /// The statistics of one batch of samples (`pos`, unit normals `nrm`) on the fine voxels
     /// of spacing `h` from `origin`. Voxels are visited in key order and samples in input
-    /// order, so the sums depend only on the batch. Jet fits are at most `max_stride` voxels
-    /// apart ([`jet_stride`]).
-    pub fn of(
-        pos: &[[f64; 3]],
-        nrm: &[[f32; 3]],
-        origin: [f64; 3],
-        h: f64,
-        max_stride: usize,
-    ) -> NoiseStats {
+    /// order, so the sums depend only on the batch. Jet fits are at most
+    /// [`JET_VOXELS_PER_FIT`] voxels apart.
+    pub fn of(pos: &[[f64; 3]], nrm: &[[f32; 3]], origin: [f64; 3], h: f64) -> NoiseStats {
         let mut keys: Vec<(u64, u32)> = pos
             .iter()
             .enumerate()
@@ -274,12 +268,12 @@ impl NoiseStats {
             }
             st.dof += run.len() as u64 - 1;
         }
-        st.add_jets(pos, nrm, &keys, origin, h, max_stride);
+        st.add_jets(pos, nrm, &keys, origin, h);
         st
     }
 
     /// The jet fits of [`NoiseStats::of`] over a batch whose `(key, index)` pairs `keys`
-    /// are sorted: centred on voxels at an even stride (at most `max_stride`), each fit in
+    /// are sorted: centred on voxels at an even stride (at most [`JET_VOXELS_PER_FIT`]), each fit in
     /// the frame of its centre voxel's mean sample and normal, on both discs.
     fn add_jets(
         &mut self,
@@ -288,11 +282,10 @@ impl NoiseStats {
         keys: &[(u64, u32)],
         origin: [f64; 3],
         h: f64,
-        max_stride: usize,
     ) {
         // Counted first, so that the pass holds nothing beyond the keys.
         let voxels = keys.chunk_by(|a, b| a.0 == b.0).count();
-        let stride = (voxels / JET_MIN_FITS as usize).clamp(1, max_stride.max(1));
+        let stride = (voxels / JET_MIN_FITS as usize).clamp(1, JET_VOXELS_PER_FIT);
         for run in keys.chunk_by(|a, b| a.0 == b.0).step_by(stride) {
             let Some((c, n, len)) = voxel_mean(run, pos, nrm) else {
                 continue;
@@ -411,7 +404,7 @@ const KEY_BITS: u32 = 21;
 /// The fine voxel holding offset `u` (in voxels from the origin) along one axis, clamped to
 /// the keys' range.
 fn voxel_index(u: f64) -> u64 {
-    u.floor().clamp(0.0, ((1u64 << KEY_BITS) - 1) as f64) as u64
+    floor(u).clamp(0.0, ((1u64 << KEY_BITS) - 1) as f64) as u64
 }
 
 /// The key of the fine voxel `v`: `x, y, z` from the most significant bits down, so that
@@ -474,7 +467,7 @@ fn voxel_in(g: &LocalGrid, p: &[f64; 3], (z0, z1): (u64, u64)) -> Option<(u64, [
         let u = (p[a] - g.origin[a]) / g.h;
         let fl = floor(u);
         off[a] = u - fl;
-        let i = (fl as i64).rem_euclid(n) as u64;
+        let i = wrap(fl as i64, n) as u64;
         if a == 2 && (i < z0 || i >= z1) {
             return None;
         }
@@ -872,7 +865,7 @@ mod tests {
                 pos.push([x, y, 0.5 + (0.5 + s * g) * h]);
             }
             let nrm = vec![[0.0, 0.0, 1.0]; pos.len()];
-            let st = NoiseStats::of(&pos, &nrm, [0.0; 3], h, JET_VOXELS_PER_FIT);
+            let st = NoiseStats::of(&pos, &nrm, [0.0; 3], h);
             let got = st.sigma_voxels().unwrap();
             assert!((got - s).abs() <= 0.1 * s + 1e-9, "{s}: {got}");
             // The weight: 4 for noise at the reference, up to 32 for precise samples.
@@ -911,7 +904,7 @@ mod tests {
         let h = 0.01;
         for (seed, s) in [(1, 0.0), (2, 0.5), (3, 1.0), (4, 1.6)] {
             let (pos, nrm) = noisy_plane(20_000, s, h, seed);
-            let st = NoiseStats::of(&pos, &nrm, [0.0; 3], h, JET_VOXELS_PER_FIT);
+            let st = NoiseStats::of(&pos, &nrm, [0.0; 3], h);
             let jet = st.jet_sigma_voxels().unwrap();
             assert!((jet - s).abs() <= 0.1 * s + 1e-9, "{s}: {jet}");
             if s >= 1.0 {
@@ -922,22 +915,33 @@ mod tests {
     }
 
     #[test]
-    fn past_ten_million_points_fewer_jets_read_the_same_noise() {
-        assert_eq!(jet_stride(0), JET_VOXELS_PER_FIT);
-        assert_eq!(jet_stride(JET_FULL_RATE_POINTS), JET_VOXELS_PER_FIT);
-        assert_eq!(jet_stride(JET_FULL_RATE_POINTS + 1), 2 * JET_VOXELS_PER_FIT);
-        assert_eq!(jet_stride(100_000_000), 10 * JET_VOXELS_PER_FIT);
-        // 250K samples on 62,500 voxels of a plane (4 a voxel), noise of one voxel: a run of
-        // 100M points fits a tenth of the jets on it and reads the same spread.
+    fn past_ten_million_points_a_share_of_the_cells_reads_the_same_noise() {
+        assert_eq!(noise_cell_stride(0), 1);
+        assert_eq!(noise_cell_stride(NOISE_FULL_RATE_POINTS), 1);
+        assert_eq!(noise_cell_stride(NOISE_FULL_RATE_POINTS + 1), 2);
+        assert_eq!(noise_cell_stride(100_000_000), 10);
+        // 250K samples on 62,500 voxels of a plane (4 a voxel), noise of one voxel, in 50
+        // stripes of 5,000 (store cells): every tenth stripe reads the spread of them all.
         let h = 0.002;
-        let (pos, nrm) = noisy_plane(250_000, 1.0, h, 5);
-        let full = NoiseStats::of(&pos, &nrm, [0.0; 3], h, jet_stride(1_000_000));
-        let thin = NoiseStats::of(&pos, &nrm, [0.0; 3], h, jet_stride(100_000_000));
+        let (mut pos, nrm) = noisy_plane(250_000, 1.0, h, 5);
+        // Stripes along x, as a store's cells are boxes.
+        pos.sort_by(|a, b| a[0].total_cmp(&b[0]));
+        let mut full = NoiseStats::default();
+        let mut thin = NoiseStats::default();
+        for (j, (p, n)) in pos.chunks(5_000).zip(nrm.chunks(5_000)).enumerate() {
+            let st = NoiseStats::of(p, n, [0.0; 3], h);
+            if j % noise_cell_stride(100_000_000) == 0 {
+                thin.add(st);
+            }
+            full.add(st);
+        }
         let (a, b) = (full.jets[0].fits, thin.jets[0].fits);
         assert!(a >= 9 * b && b >= JET_MIN_FITS, "{a} {b}");
         for st in [&full, &thin] {
             let jet = st.jet_sigma_voxels().unwrap();
             assert!((jet - 1.0).abs() <= 0.1, "{jet}: {st:?}");
+            let within = st.sigma_voxels().unwrap();
+            assert!((0.25..0.3).contains(&within), "{within}: {st:?}");
         }
     }
 
@@ -958,7 +962,7 @@ mod tests {
             pos.push([0, 1, 2].map(|a| 0.5 + r * n[a]));
             nrm.push(n.map(|x| x as f32));
         }
-        let st = NoiseStats::of(&pos, &nrm, [0.0; 3], h, JET_VOXELS_PER_FIT);
+        let st = NoiseStats::of(&pos, &nrm, [0.0; 3], h);
         assert!(st.jet_sigma_voxels().unwrap() < 0.01, "{st:?}");
     }
 
@@ -996,23 +1000,11 @@ mod tests {
     #[test]
     fn noise_stats_need_two_samples_in_a_voxel() {
         let pos = [[0.05, 0.05, 0.05], [0.15, 0.05, 0.05]];
-        let st = NoiseStats::of(
-            &pos,
-            &[[0.0, 0.0, 1.0]; 2],
-            [0.0; 3],
-            0.1,
-            JET_VOXELS_PER_FIT,
-        );
+        let st = NoiseStats::of(&pos, &[[0.0, 0.0, 1.0]; 2], [0.0; 3], 0.1);
         assert_eq!(st.sigma_voxels(), None);
         // Opposite normals in one voxel: a thin sheet, not noise.
         let pos = [[0.05, 0.05, 0.04], [0.05, 0.05, 0.06]];
-        let st = NoiseStats::of(
-            &pos,
-            &[[0.0, 0.0, 1.0], [0.0, 0.0, -1.0]],
-            [0.0; 3],
-            0.1,
-            JET_VOXELS_PER_FIT,
-        );
+        let st = NoiseStats::of(&pos, &[[0.0, 0.0, 1.0], [0.0, 0.0, -1.0]], [0.0; 3], 0.1);
         assert_eq!(st.sigma_voxels(), None);
     }
 

@@ -33,7 +33,7 @@
 //! level always reads points: its iso-value and the vertex fit need them.
 
 use super::fft_solve::LocalGrid;
-use crate::types::Cube;
+use crate::types::{Cube, wrap};
 
 /// The samples of one voxel of a level's lattice, summed.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -151,7 +151,7 @@ pub fn splat_voxels(grid: &LocalGrid, on: OnLattice, voxels: &[VoxelSum], v: &mu
         for (c, nn) in s.corner.iter().enumerate() {
             let g = [0, 1, 2].map(|a| s.at[a] + ((c >> a) & 1) as i64);
             if on.step == 1 {
-                let [x, y, z] = [0, 1, 2].map(|a| (g[a] - on.origin[a]).rem_euclid(n) as usize);
+                let [x, y, z] = [0, 1, 2].map(|a| wrap(g[a] - on.origin[a], n) as usize);
                 let cell = &mut v[(z * grid.n + y) * grid.n + x];
                 for a in 0..3 {
                     cell[a] += scale * nn[a];
@@ -220,7 +220,7 @@ pub fn screen_voxel(n: usize, on: OnLattice, s: &VoxelSum) -> ([usize; 3], [f64;
     for a in 0..3 {
         let j = (s.at[a] - on.origin[a]).rem_euclid(on.step) as f64;
         off[a] = (j * s.count as f64 + s.offset[a]) / on.step as f64;
-        v[a] = at[a].rem_euclid(n as i64) as usize;
+        v[a] = wrap(at[a], n as i64) as usize;
     }
     (v, off)
 }

@@ -187,6 +187,11 @@ impl NearPoints {
                 (d2, self.pos[i], self.col[i], self.inten[i])
             })
             .collect();
+        // `found` is ordered by distance already: only a tie in distance can reorder it.
+        if found.windows(2).all(|w| w[0].0 < w[1].0) {
+            nb.truncate(want);
+            return nb;
+        }
         nb.sort_by(|a, b| {
             a.0.total_cmp(&b.0)
                 .then(a.1.partial_cmp(&b.1).unwrap_or(std::cmp::Ordering::Equal))

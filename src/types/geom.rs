@@ -159,7 +159,7 @@ impl Cube {
         let max = (1u64 << level) - 1;
         let mut c = [0u32; 3];
         for i in 0..3 {
-            let v = ((p[i] - self.origin[i]) * inv).floor();
+            let v = floor((p[i] - self.origin[i]) * inv);
             c[i] = if v <= 0.0 {
                 0
             } else {
@@ -258,6 +258,18 @@ pub fn floor(x: f64) -> f64 {
     if t > x { t - 1.0 } else { t }
 }
 
+/// `i.rem_euclid(n)` for `n > 0`, without the integer division where `i` already lies in
+/// `0..n`: the samples of a local grid wrap only at its edges, and a division per axis was a
+/// visible share of the per-sample loops (splat, screening, evaluation).
+#[inline(always)]
+pub fn wrap(i: i64, n: i64) -> i64 {
+    if (0..n).contains(&i) {
+        i
+    } else {
+        i.rem_euclid(n)
+    }
+}
+
 /// The least and greatest z of `pos` (`None` for no points).
 pub fn z_range(pos: &[[f64; 3]]) -> Option<(f64, f64)> {
     let first = pos.first()?[2];
@@ -279,7 +291,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn floor_and_round_agree_with_libm() {
+    fn floor_round_and_wrap_agree_with_libm() {
         let half = 0.5f64.next_down();
         for x in [
             0.0,
@@ -300,6 +312,10 @@ mod tests {
             -1e-300,
         ] {
             assert_eq!(floor(x), x.floor(), "{x}");
+            let i = x as i64;
+            for n in [1, 7, 64] {
+                assert_eq!(wrap(i, n), i.rem_euclid(n), "{i} {n}");
+            }
             if (0.0..9e15).contains(&x) {
                 assert_eq!(round_index(x), x.round() as usize, "{x}");
             }
