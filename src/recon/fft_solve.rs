@@ -256,6 +256,26 @@ pub struct Convergence {
     pub residual: f64,
 }
 
+/// A multiplier of the spectrum by folded frequency indices `|mz|, |my|, kx` (each below
+/// `h1 = n/2 + 1`), tabulated z fastest ([`table_index`]): the order in which
+/// [`Solver::spectral`]'s z rows meet it.
+fn tabulate(h1: usize, f: impl Fn(usize, usize, usize) -> f32) -> Vec<f32> {
+    let mut t = Vec::with_capacity(h1 * h1 * h1);
+    for fy in 0..h1 {
+        for kx in 0..h1 {
+            for fz in 0..h1 {
+                t.push(f(fz, fy, kx));
+            }
+        }
+    }
+    t
+}
+
+/// Where [`tabulate`] puts the multiplier of `|mz|, |my|, kx`.
+fn table_index(h1: usize, fz: usize, fy: usize, kx: usize) -> usize {
+    (fy * h1 + kx) * h1 + fz
+}
+
 /// `Σ a_i b_i` in f64, summed per slab of `slab` values and then over slabs in order: the
 /// same bits for any thread count.
 fn dot(a: &[f32], b: &[f32], slab: usize) -> f64 {
@@ -284,8 +304,7 @@ pub struct Solver {
     c2r: Arc<dyn ComplexToReal<f32>>,
     fwd: Arc<dyn Fft<f32>>,
     inv: Arc<dyn Fft<f32>>,
-    /// `filter[(ay·(n/2+1) + ax)·(n/2+1) + az]` for folded indices `a = min(m, n − m)`: z
-    /// fastest, the order in which the transform's z rows meet it ([`Solver::spectral`]).
+    /// The filter by folded indices `a = min(m, n − m)`, laid out by [`tabulate`].
     filter: Vec<f32>,
     /// `|k|²` per axis by folded index (cube units): the Laplacian's symbol is their sum.
     k2: Vec<f32>,
@@ -312,18 +331,14 @@ impl Solver {
                 k * k
             })
             .collect();
-        let mut filter = vec![0f32; h1 * h1 * h1];
-        for z in 0..h1 {
-            for y in 0..h1 {
-                for x in 0..h1 {
-                    let kk = k2[x] + k2[y] + k2[z];
-                    if kk != 0.0 {
-                        let g = (-(0.5 * sigma * sigma * kk)).exp() / kk;
-                        filter[(y * h1 + x) * h1 + z] = -(g as f32);
-                    }
-                }
+        let filter = tabulate(h1, |fz, fy, kx| {
+            let kk = k2[kx] + k2[fy] + k2[fz];
+            if kk == 0.0 {
+                return 0.0;
             }
-        }
+            let g = (-(0.5 * sigma * sigma * kk)).exp() / kk;
+            -(g as f32)
+        });
         Solver {
             n,
             h: grid.h,
@@ -418,11 +433,12 @@ impl Solver {
     /// `(az·(n/2+1) + ay)·(n/2+1) + ax`).
     pub fn tables(&self) -> (usize, &[f32], Vec<f32>) {
         let h1 = self.n / 2 + 1;
-        let mut filter = vec![0f32; h1 * h1 * h1];
-        for (i, f) in filter.iter_mut().enumerate() {
-            let (z, y, x) = (i / (h1 * h1), (i / h1) % h1, i % h1);
-            *f = self.filter[(y * h1 + x) * h1 + z];
-        }
+        let filter = (0..h1 * h1 * h1)
+            .map(|i| {
+                let (z, y, x) = (i / (h1 * h1), (i / h1) % h1, i % h1);
+                self.filter[table_index(h1, z, y, x)]
+            })
+            .collect();
         (self.n, &self.k2, filter)
     }
 
@@ -490,12 +506,9 @@ impl Solver {
         // The preconditioner's multipliers, tabulated once a solve in the filter's order
         // (a division per frequency of every transform was a twentieth of the leaf stage).
         let k2 = &self.k2;
-        let h1 = n / 2 + 1;
-        let mut inverse = vec![0f32; h1 * h1 * h1];
-        for (i, m) in inverse.iter_mut().enumerate() {
-            let (fy, kx, fz) = (i / (h1 * h1), (i / h1) % h1, i % h1);
-            *m = 1.0 / (k2[fz] + k2[fy] + k2[kx] + mu);
-        }
+        let inverse = tabulate(n / 2 + 1, |fz, fy, kx| {
+            1.0 / (k2[fz] + k2[fy] + k2[kx] + mu)
+        });
         let precondition = |r: &[f32]| self.spectral(r, false, &inverse);
         let mut z = precondition(&r);
         let mut p = z.clone();
@@ -546,9 +559,8 @@ impl Solver {
         )
     }
 
-    /// Multiply the spectrum of the real grid `input` by `mul[(|my|·(n/2+1) + kx)·(n/2+1) +
-    /// |mz|]` (folded frequency indices, z fastest, as [`Solver`]'s filter), zero the mean
-    /// when `zero_mean`, and transform back.
+    /// Multiply the spectrum of the real grid `input` by the table `mul` ([`tabulate`], by
+    /// folded frequency indices), zero the mean when `zero_mean`, and transform back.
     fn spectral(&self, input: &[f32], zero_mean: bool, mul: &[f32]) -> Vec<f32> {
         let n = self.n;
         let len = n * n * n;
@@ -589,7 +601,8 @@ impl Solver {
                 let fy = fold(y);
                 for (kx, row) in block.chunks_exact_mut(n).enumerate() {
                     // Row z takes the multiplier of |mz| = min(z, n − z).
-                    let m = &mul[(fy * h1 + kx) * h1..(fy * h1 + kx + 1) * h1];
+                    let at = table_index(h1, 0, fy, kx);
+                    let m = &mul[at..at + h1];
                     let (lo, hi) = row.split_at_mut(h1);
                     for (c, &f) in lo.iter_mut().zip(m) {
                         *c *= f;

@@ -273,8 +273,8 @@ impl NoiseStats {
     }
 
     /// The jet fits of [`NoiseStats::of`] over a batch whose `(key, index)` pairs `keys`
-    /// are sorted: centred on voxels at an even stride (at most [`JET_VOXELS_PER_FIT`]), each fit in
-    /// the frame of its centre voxel's mean sample and normal, on both discs.
+    /// are sorted: centred on voxels at an even stride (at most [`JET_VOXELS_PER_FIT`]), each
+    /// fit in the frame of its centre voxel's mean sample and normal, on both discs.
     fn add_jets(
         &mut self,
         pos: &[[f64; 3]],
