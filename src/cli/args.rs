@@ -652,9 +652,11 @@ pub struct ReconstructArgs {
     pub trim: bool,
     /// Width in voxels of the Gaussian that smooths the normal field before the solve
     /// (Kazhdan 2005), in (0, 8]: larger is smoother and more robust to noise, smaller
-    /// follows the points more closely.
-    #[arg(long, default_value_t = 1.0)]
-    pub smooth: f64,
+    /// follows the points more closely. `measured` (the default) takes it from the samples'
+    /// spread measured within fine voxels: 0.35 for precise samples (fine relief), growing
+    /// with the spread to 1 for noise of a fifth of a voxel and more.
+    #[arg(long, default_value = "measured")]
+    pub smooth: String,
     /// Screening weight α of the screened Poisson solve (Kazhdan & Hoppe 2013): how
     /// strongly the surface is pulled through the samples against the smoothed normals, in
     /// [0, 64]; 0 solves the unscreened equation; a number is used as given, as

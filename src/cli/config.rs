@@ -13,7 +13,7 @@ use scanflow::normals::{NormalParams, NormalsMode};
 use scanflow::pipeline::ReconParams;
 use scanflow::pipeline::ingest::IngestParams;
 use scanflow::pipeline::shard::Shard;
-use scanflow::recon::{DEPTHS, PointWeight};
+use scanflow::recon::{DEPTHS, PointWeight, Smoothing};
 use scanflow::synth::{BUMPY_RELIEF, Shape};
 
 use super::args::{
@@ -410,10 +410,15 @@ pub struct ReconstructConfig {
 
 impl ReconstructConfig {
     fn new(a: ReconstructArgs) -> Result<ReconstructConfig> {
-        let smooth = a.smooth;
-        if !(smooth > 0.0 && smooth <= MAX_SMOOTH_VOXELS) {
-            bail!("--smooth {smooth}: expected a width in voxels in (0, {MAX_SMOOTH_VOXELS}]");
-        }
+        let smooth = match a.smooth.as_str() {
+            "measured" => Smoothing::Measured,
+            w => match w.parse::<f64>() {
+                Ok(s) if s > 0.0 && s <= MAX_SMOOTH_VOXELS => Smoothing::Fixed(s),
+                _ => bail!(
+                    "--smooth {w}: expected measured or a width in voxels in (0, {MAX_SMOOTH_VOXELS}]"
+                ),
+            },
+        };
         let point_weight = match a.point_weight.as_str() {
             "standard" => PointWeight::Standard,
             "auto" => PointWeight::Auto,
@@ -499,7 +504,7 @@ impl ReconstructConfig {
         params.error = error;
         params.min_points = a.min_points;
         params.trim = a.trim;
-        params.sigma_vox = smooth;
+        params.smoothing = smooth;
         params.point_weight = point_weight;
         params.fit = !a.no_fit;
         params.gpu = a.gpu.into();

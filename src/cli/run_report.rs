@@ -161,7 +161,7 @@ pub fn recon_options(c: &ReconstructConfig) -> Vec<(String, String)> {
     let mut o = vec![
         ("--depth", p.depth.to_string()),
         ("--point-weight", p.point_weight.to_string()),
-        ("--smooth", p.sigma_vox.to_string()),
+        ("--smooth", p.smoothing.to_string()),
         ("--error", p.error.to_string()),
         ("--min-points", p.min_points.to_string()),
         ("--trim", p.trim.to_string()),

@@ -29,7 +29,7 @@ use crate::recon::pou::unit_for;
 use crate::recon::{
     CoarseField, DEFAULT_ERROR, DEFAULT_MIN_POINTS, LeafDetail, LeafRule, LeafSolvers, Level,
     Moments, Plan, PlanBudget, PointWeight, fft_solve, refine_leaf,
-    screen::{self, NOISE_KEY_BYTES, NoiseStats, ScreenBuilder},
+    screen::{self, NOISE_KEY_BYTES, NoiseStats, ScreenBuilder, Smoothing},
     solve_coarse,
 };
 use crate::store::Store;
@@ -52,8 +52,9 @@ const MIN_POINTS: u64 = 16;
 pub struct ReconParams {
     /// Octree depth: `2^depth` cells per edge of the cube (as PoissonRecon's `--depth`).
     pub depth: u32,
-    /// Gaussian smoothing width, in voxels of each grid.
-    pub sigma_vox: f64,
+    /// Gaussian smoothing width (`--smooth`: measured from the samples' precision, or a
+    /// fixed width in voxels of each grid), see [`crate::recon::screen::Smoothing`].
+    pub smoothing: Smoothing,
     /// Screening weight α (`--point-weight`: `standard`, 4 lowered for noise beyond a
     /// voxel; `auto`, also raised for precise samples; or a fixed α, 0: unscreened), see
     /// [`crate::recon::screen`].
@@ -130,7 +131,7 @@ impl ReconParams {
     pub fn new(depth: u32, work_dir: PathBuf) -> ReconParams {
         ReconParams {
             depth,
-            sigma_vox: 1.0,
+            smoothing: Smoothing::Measured,
             point_weight: PointWeight::Standard,
             fit: true,
             tile_voxels: None,
@@ -298,6 +299,7 @@ pub fn reconstruct(
     // The weight the coarse solve used, for every leaf (`auto` measures it there).
     for p in &mut levels {
         p.point_weight = coarse.point_weight;
+        p.sigma_vox = coarse.sigma_vox;
         p.noise_voxels = coarse.noise.sigma_voxels();
     }
     let plan = levels[0];
@@ -492,7 +494,9 @@ fn plan_run(store: &Store, params: &ReconParams, ctx: &Ctx) -> Result<Vec<Plan>>
     let mut levels = crate::recon::plan::levels(
         m.cube,
         params.depth,
-        params.sigma_vox,
+        // Before the noise is measured `measured` is the widest: the width is the solves'
+        // alone, set by the coarse pass with the weight.
+        params.smoothing.voxels(&NoiseStats::default()),
         // Before the noise is measured `standard` and `auto` are the base weight: the grids
         // are sized for a screened solve, and the coarse pass sets the weight (never to 0).
         params.point_weight.alpha(&NoiseStats::default()),
@@ -558,6 +562,8 @@ struct CoarsePass {
     iterations: u32,
     /// The screening weight of the run (`standard`'s or `auto`'s choice, or the one given).
     point_weight: f64,
+    /// The Gaussian's width of the run, in voxels of each grid (measured, or the one given).
+    sigma_vox: f64,
     /// The samples' noise, measured beside the splat.
     noise: NoiseStats,
 }
@@ -636,7 +642,7 @@ fn coarse_pass(
     store: &Store,
     fine: &Plan,
     plan: &Plan,
-    weight: PointWeight,
+    params: &ReconParams,
     ctx: &Ctx,
 ) -> Result<CoarsePass> {
     let m = &store.manifest;
@@ -746,9 +752,11 @@ fn coarse_pass(
     stage.finish(None);
     moments.check_not_flat(&store.dir)?;
     let stage = ctx.progress.stage("coarse", None, "solves");
-    let point_weight = weight.alpha(&noise);
+    let point_weight = params.point_weight.alpha(&noise);
+    let sigma_vox = params.smoothing.voxels(&noise);
     let screen = screen.finish(point_weight);
-    let (field, conv) = ctx.pool.install(|| solve_coarse(plan, v, &screen));
+    let solved = Plan { sigma_vox, ..*plan };
+    let (field, conv) = ctx.pool.install(|| solve_coarse(&solved, v, &screen));
     drop(screen);
     drop(screen_permit);
     // From here on only the solution and the density grid are held (the plan counted on
@@ -767,6 +775,7 @@ fn coarse_pass(
         support,
         iterations: conv.iterations,
         point_weight,
+        sigma_vox,
         noise,
     })
 }
@@ -830,10 +839,12 @@ fn coarse_or_checkpoint(
             support,
             iterations: c.iterations,
             point_weight: c.point_weight,
+            // A function of the statistics read back, as the pass computed it.
+            sigma_vox: params.smoothing.voxels(&c.noise),
             noise: c.noise,
         });
     }
-    let c = coarse_pass(store, fine, plan, params.point_weight, ctx)?;
+    let c = coarse_pass(store, fine, plan, params, ctx)?;
     let field = c
         .field
         .dense_values()

@@ -127,7 +127,7 @@ impl RunIdentity {
         let options = [
             ("command", "reconstruct".to_string()),
             ("--depth", params.depth.to_string()),
-            ("--smooth", params.sigma_vox.to_string()),
+            ("--smooth", params.smoothing.to_string()),
             ("--point-weight", params.point_weight.to_string()),
             ("--error", params.error.to_string()),
             ("--min-points", params.min_points.to_string()),

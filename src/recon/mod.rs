@@ -103,7 +103,7 @@ pub use coarse::{CoarseField, CoarseGrid, Level, Moments};
 pub use global::{GlobalField, global_field};
 pub use leaf::{LeafDetail, LeafPoints, LeafSolvers, coarse_error, coarse_only, solve_leaf};
 pub use plan::{DEFAULT_ERROR, DEFAULT_MIN_POINTS, DEPTHS, Plan, PlanBudget};
-pub use screen::PointWeight;
+pub use screen::{PointWeight, Smoothing};
 
 use crate::types::CellKey;
 

@@ -455,7 +455,8 @@ impl Oracle {
         }
     }
 
-    /// One global solve at `depth` screened with `weight`.
+    /// One global solve at `depth` screened with `weight`, smoothed by one voxel (the runs
+    /// measured against it pass `--smooth 1`).
     fn global(&self, depth: u32, weight: f64) -> scanflow::io::mesh_read::Mesh {
         to_mesh(
             &scanflow::pipeline::global_solve(&self.pos, &self.nrm, &self.cube, depth, 1.0, weight)
@@ -506,7 +507,16 @@ fn two_level_matches_one_global_solve() {
         recon(
             &t.store,
             &out,
-            &["--depth", "7", "--error", "0", "--point-weight", &w],
+            &[
+                "--depth",
+                "7",
+                "--error",
+                "0",
+                "--point-weight",
+                &w,
+                "--smooth",
+                "1",
+            ],
         );
         t.assert_like(&out, &t.global(7, weight), &format!("--point-weight {w}"));
     }
@@ -524,9 +534,22 @@ fn levels_of_leaves_match_one_global_solve_and_keep_the_contracts() {
     let t = Oracle::new();
     let (d, store) = (t.d.path(), &t.store);
     let two = d.join("two.ply");
-    recon(store, &two, &["--depth", "8", "--error", "0"]);
+    recon(
+        store,
+        &two,
+        &["--depth", "8", "--error", "0", "--smooth", "1"],
+    );
     let three = d.join("three.ply");
-    let opts = ["--depth", "8", "--error", "0", "--coarse-depth", "4"];
+    let opts = [
+        "--depth",
+        "8",
+        "--error",
+        "0",
+        "--coarse-depth",
+        "4",
+        "--smooth",
+        "1",
+    ];
     let o = recon(store, &three, &opts);
     assert!(o.contains("at depth 6"), "{o}");
     // The level at depth 6 reads its store cells summed per voxel (measured: 577K reads in
