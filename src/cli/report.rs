@@ -102,7 +102,7 @@ pub fn reconstruct(st: &ReconStats, out: &Path, total_secs: f64) {
         .collect::<Vec<_>>()
         .join(",");
     outln!(
-        "reconstructed {} vertices, {} triangles into {} in {:.2} s (solve and mesh {:.2} s; {} leaves, {} refined{above}{screened}; iso-value of the field {:.4}), peak memory {}",
+        "reconstructed {} vertices, {} triangles into {} in {:.2} s (solve and mesh {:.2} s; {} leaves, {} refined{above}{screened}; normals smoothed over {} voxel; iso-value of the field {:.4}), peak memory {}",
         st.vertices,
         st.faces,
         out.display(),
@@ -110,6 +110,7 @@ pub fn reconstruct(st: &ReconStats, out: &Path, total_secs: f64) {
         st.secs,
         st.leaves,
         st.leaves_refined,
+        short(st.smooth_voxels),
         st.iso,
         human_bytes(peak_rss_bytes())
     );

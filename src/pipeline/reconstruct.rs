@@ -175,6 +175,8 @@ pub struct ReconStats {
     pub iso: f64,
     /// Screening weight α the solves used (0: unscreened).
     pub point_weight: f64,
+    /// The Gaussian's width the solves used, in voxels of each grid (`--smooth`).
+    pub smooth_voxels: f64,
     /// The samples' spread across the surface in fine voxels, where one could be measured
     /// ([`crate::recon::screen::NoiseStats`]).
     pub noise_voxels: Option<f64>,
@@ -411,6 +413,7 @@ pub fn reconstruct(
         tiles_total: nonempty.len(),
         iso: leaves.iso,
         point_weight: plan.point_weight,
+        smooth_voxels: plan.sigma_vox,
         noise_voxels: plan.noise_voxels,
         jet_noise_voxels: noise.jet_sigma_voxels(),
         coarse_iterations,

@@ -770,9 +770,11 @@ fn same_mesh_for_any_thread_count_under_a_tight_budget() {
 #[test]
 fn the_screening_weight_follows_the_noise() {
     // The default (`standard`) screens with PoissonRecon's 4 and lowers it as 1/σ² for noise
-    // across the surface beyond 0.85 voxel (2 voxels here: about (0.85/2)² of it); `auto`
-    // also raises it for precise samples, to 32; a given weight is used as it is. The
-    // summary names the weight and the noise (within voxels, about local quadrics).
+    // across the surface beyond 0.85 voxel (2 voxels here: about (0.85/2)² of it), and takes
+    // 8 for precise samples; `auto` raises it for precise samples to 32; a given weight is
+    // used as it is. The summary names the weight and the noise (within voxels, about local
+    // quadrics), and the Gaussian's width the measured precision chose: 0.35 voxel for the
+    // precise sphere, 1 for the noisy one.
     let d = tempfile::tempdir().unwrap();
     let weight = |summary: &str| {
         let at = summary.find("--point-weight ").expect(summary) + "--point-weight ".len();
@@ -782,7 +784,16 @@ fn the_screening_weight_follows_the_noise() {
             .collect();
         let noise = summary[at..].contains("voxel within a voxel")
             && summary[at..].contains("about local quadrics)");
-        (w.parse::<f64>().unwrap(), noise)
+        let at = summary.find("smoothed over ").expect(summary) + "smoothed over ".len();
+        let smooth: String = summary[at..]
+            .chars()
+            .take_while(|c| c.is_ascii_digit() || *c == '.')
+            .collect();
+        (
+            w.parse::<f64>().unwrap(),
+            noise,
+            smooth.parse::<f64>().unwrap(),
+        )
     };
     let mut plys = Vec::new();
     for noise in [0.0, 0.01] {
@@ -791,7 +802,7 @@ fn the_screening_weight_follows_the_noise() {
         plys.push(synth(&sub, "sphere", 40_000, noise));
     }
     let cases: [(usize, &[&str], std::ops::RangeInclusive<f64>); 5] = [
-        (0, &[], 4.0..=4.0),
+        (0, &[], 8.0..=8.0),
         (0, &["--point-weight", "auto"], 32.0..=32.0),
         (1, &[], 0.5..=1.2),
         (1, &["--point-weight", "auto"], 0.5..=1.2),
@@ -803,12 +814,13 @@ fn the_screening_weight_follows_the_noise() {
             .into_iter()
             .chain(args.iter().copied())
             .collect();
-        let (w, measured) = weight(&recon(&plys[ply], &out, &args));
+        let (w, measured, smooth) = weight(&recon(&plys[ply], &out, &args));
         // The noise is measured whatever the weight (the vertex fit uses it).
         assert!(
             want.contains(&w) && measured,
             "{args:?}: --point-weight {w}"
         );
+        assert_eq!(smooth, [0.35, 1.0][ply], "{args:?}");
     }
 }
 
