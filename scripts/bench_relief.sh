@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Fine relief, with and without noise: scanflow reconstruct (the default, screened with 4
-# lowered for noise beyond 0.85 voxel, with the vertex fit; --point-weight auto, also raised for
+# lowered for noise beyond 0.85 voxel or 8 for precise samples, its Gaussian's width from the
+# measured precision, with the vertex fit; --point-weight auto, also raised for
 # precise samples: the *.log files give the weight and the measured noise; unscreened,
 # --point-weight 0; and the default with --no-fit) against PoissonRecon (screened, pymeshlab) and Open3D's Poisson on the same points, same
 # depth, same run (scripts/poisson_peer.py). A sphere of radius 1 carries the relief
