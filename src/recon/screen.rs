@@ -126,11 +126,16 @@ pub const PRECISE_POINT_WEIGHT: f64 = 8.0;
 /// `min(1, (σ_lim/σ_jet)²)`; 1 where the spread was not measured, or where the spread
 /// `within` fine voxels is under [`PRECISE_WITHIN_VOXELS`].
 pub fn noise_limit(within: Option<f64>, jet_sigma: Option<f64>) -> f64 {
-    match (within, jet_sigma) {
-        (Some(w), _) if w < PRECISE_WITHIN_VOXELS => 1.0,
-        (_, Some(s)) if s > NOISE_LIMIT_VOXELS => (NOISE_LIMIT_VOXELS / s).powi(2),
+    match jet_sigma {
+        Some(s) if s > NOISE_LIMIT_VOXELS && !precise(within) => (NOISE_LIMIT_VOXELS / s).powi(2),
         _ => 1.0,
     }
+}
+
+/// Whether samples whose spread `within` fine voxels was measured are precise (under
+/// [`PRECISE_WITHIN_VOXELS`]).
+fn precise(within: Option<f64>) -> bool {
+    within.is_some_and(|w| w < PRECISE_WITHIN_VOXELS)
 }
 
 /// The screening weight `auto` takes for a spread `sigma` of the samples within fine voxels
@@ -162,10 +167,14 @@ impl PointWeight {
     /// ([`NoiseStats::default`] where nothing is measured yet).
     pub fn alpha(self, noise: &NoiseStats) -> f64 {
         match self {
-            PointWeight::Standard => match noise.sigma_voxels() {
-                Some(w) if w < PRECISE_WITHIN_VOXELS => PRECISE_POINT_WEIGHT,
-                w => BASE_POINT_WEIGHT * noise_limit(w, noise.jet_sigma_voxels()),
-            },
+            PointWeight::Standard => {
+                let within = noise.sigma_voxels();
+                if precise(within) {
+                    PRECISE_POINT_WEIGHT
+                } else {
+                    BASE_POINT_WEIGHT * noise_limit(within, noise.jet_sigma_voxels())
+                }
+            }
             PointWeight::Auto => {
                 auto_point_weight(noise.sigma_voxels())
                     * noise_limit(noise.sigma_voxels(), noise.jet_sigma_voxels())

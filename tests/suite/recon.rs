@@ -776,24 +776,20 @@ fn the_screening_weight_follows_the_noise() {
     // quadrics), and the Gaussian's width the measured precision chose: 0.35 voxel for the
     // precise sphere, 1 for the noisy one.
     let d = tempfile::tempdir().unwrap();
+    // The number after `label` in `summary`, and the text from it on.
+    let after = |summary: &str, label: &str| -> (f64, String) {
+        let at = summary.find(label).expect(summary) + label.len();
+        let rest = &summary[at..];
+        let n: String = rest
+            .chars()
+            .take_while(|c| c.is_ascii_digit() || *c == '.')
+            .collect();
+        (n.parse().expect(summary), rest.to_string())
+    };
     let weight = |summary: &str| {
-        let at = summary.find("--point-weight ").expect(summary) + "--point-weight ".len();
-        let w: String = summary[at..]
-            .chars()
-            .take_while(|c| c.is_ascii_digit() || *c == '.')
-            .collect();
-        let noise = summary[at..].contains("voxel within a voxel")
-            && summary[at..].contains("about local quadrics)");
-        let at = summary.find("smoothed over ").expect(summary) + "smoothed over ".len();
-        let smooth: String = summary[at..]
-            .chars()
-            .take_while(|c| c.is_ascii_digit() || *c == '.')
-            .collect();
-        (
-            w.parse::<f64>().unwrap(),
-            noise,
-            smooth.parse::<f64>().unwrap(),
-        )
+        let (w, rest) = after(summary, "--point-weight ");
+        let noise = rest.contains("voxel within a voxel") && rest.contains("about local quadrics)");
+        (w, noise, after(summary, "smoothed over ").0)
     };
     let mut plys = Vec::new();
     for noise in [0.0, 0.01] {
