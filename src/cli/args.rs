@@ -654,7 +654,9 @@ pub struct ReconstructArgs {
     /// (Kazhdan 2005), in (0, 8]: larger is smoother and more robust to noise, smaller
     /// follows the points more closely. `measured` (the default) takes it from the samples'
     /// spread measured within fine voxels: 0.35 for precise samples (fine relief), growing
-    /// with the spread to 1 for noise of a fifth of a voxel and more.
+    /// with the spread to 1 for noise of a fifth of a voxel and more; and on every grid at
+    /// least 0.4 of the samples' spacing in its voxels (up to 4), where a depth finer than
+    /// the sampling would leave them apart.
     #[arg(long, default_value = "measured")]
     pub smooth: String,
     /// Screening weight α of the screened Poisson solve (Kazhdan & Hoppe 2013): how

@@ -79,6 +79,12 @@ pub fn reconstruct(st: &ReconStats, out: &Path, total_secs: f64) {
     } else {
         String::new()
     };
+    // Where the samples lie farther apart than a voxel, how far (the Gaussian widens to 0.4
+    // of it, `recon::screen::sparse_floor_voxels`).
+    let spacing = match st.sample_spacing_voxels {
+        Some(s) if s > 1.0 => format!(" (the samples {s:.2} voxels apart)"),
+        _ => String::new(),
+    };
     // The levels above the finest, top first: "over 812 leaves (640 refined) at depth 9".
     let above: String = st
         .levels_above
@@ -102,7 +108,7 @@ pub fn reconstruct(st: &ReconStats, out: &Path, total_secs: f64) {
         .collect::<Vec<_>>()
         .join(",");
     outln!(
-        "reconstructed {} vertices, {} triangles into {} in {:.2} s (solve and mesh {:.2} s; {} leaves, {} refined{above}{screened}; normals smoothed over {} voxel; iso-value of the field {:.4}), peak memory {}",
+        "reconstructed {} vertices, {} triangles into {} in {:.2} s (solve and mesh {:.2} s; {} leaves, {} refined{above}{screened}; normals smoothed over {} voxel{spacing}; iso-value of the field {:.4}), peak memory {}",
         st.vertices,
         st.faces,
         out.display(),

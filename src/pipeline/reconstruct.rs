@@ -175,8 +175,11 @@ pub struct ReconStats {
     pub iso: f64,
     /// Screening weight α the solves used (0: unscreened).
     pub point_weight: f64,
-    /// The Gaussian's width the solves used, in voxels of each grid (`--smooth`).
+    /// The Gaussian's width the finest leaves' solves used, in fine voxels (`--smooth`).
     pub smooth_voxels: f64,
+    /// The typical distance between neighbouring samples, in fine voxels, from the sampling
+    /// density ([`crate::recon::density::DensityGrid::sample_spacing`]).
+    pub sample_spacing_voxels: Option<f64>,
     /// The samples' spread across the surface in fine voxels, where one could be measured
     /// ([`crate::recon::screen::NoiseStats`]).
     pub noise_voxels: Option<f64>,
@@ -298,11 +301,20 @@ pub fn reconstruct(
     let dirs = workdir::prepare(store, &levels, params)?;
     let top = *levels.last().expect("a plan has a level");
     let coarse = coarse_or_checkpoint(store, &levels[0], &top, params, &dirs, ctx)?;
-    // The weight the coarse solve used, for every leaf (`auto` measures it there).
+    // The weight the coarse solve used, for every leaf (`auto` measures it there); the
+    // Gaussian's width per level, from the noise and the samples' spacing on its grid, the
+    // coarse local solves taking the width of the field they stand in for (the level above,
+    // or the dense solve).
+    let spacing = coarse.density.sample_spacing();
     for p in &mut levels {
         p.point_weight = coarse.point_weight;
-        p.sigma_vox = coarse.sigma_vox;
+        p.sigma_vox = smoothing_on(params, &coarse.noise, spacing, p.spacing);
         p.noise_voxels = coarse.noise.sigma_voxels();
+    }
+    for i in 0..levels.len() {
+        levels[i].coarse_sigma_vox = levels
+            .get(i + 1)
+            .map_or(coarse.sigma_vox, |up| up.sigma_vox);
     }
     let plan = levels[0];
     let point_cap = ctx
@@ -414,6 +426,7 @@ pub fn reconstruct(
         iso: leaves.iso,
         point_weight: plan.point_weight,
         smooth_voxels: plan.sigma_vox,
+        sample_spacing_voxels: spacing.map(|s| s / plan.spacing),
         noise_voxels: plan.noise_voxels,
         jet_noise_voxels: noise.jet_sigma_voxels(),
         coarse_iterations,
@@ -499,7 +512,7 @@ fn plan_run(store: &Store, params: &ReconParams, ctx: &Ctx) -> Result<Vec<Plan>>
         params.depth,
         // Before the noise is measured `measured` is the widest: the width is the solves'
         // alone, set by the coarse pass with the weight.
-        params.smoothing.voxels(&NoiseStats::default()),
+        params.smoothing.voxels(&NoiseStats::default(), None),
         // Before the noise is measured `standard` and `auto` are the base weight: the grids
         // are sized for a screened solve, and the coarse pass sets the weight (never to 0).
         params.point_weight.alpha(&NoiseStats::default()),
@@ -756,7 +769,12 @@ fn coarse_pass(
     moments.check_not_flat(&store.dir)?;
     let stage = ctx.progress.stage("coarse", None, "solves");
     let point_weight = params.point_weight.alpha(&noise);
-    let sigma_vox = params.smoothing.voxels(&noise);
+    let sigma_vox = smoothing_on(
+        params,
+        &noise,
+        density.sample_spacing(),
+        plan.coarse_spacing(),
+    );
     let screen = screen.finish(point_weight);
     let solved = Plan { sigma_vox, ..*plan };
     let (field, conv) = ctx.pool.install(|| solve_coarse(&solved, v, &screen));
@@ -781,6 +799,12 @@ fn coarse_pass(
         sigma_vox,
         noise,
     })
+}
+
+/// The Gaussian's width for a grid of spacing `h` (input units), in its voxels: `--smooth`
+/// for samples of the measured `noise` lying `spacing` apart (input units).
+fn smoothing_on(params: &ReconParams, noise: &NoiseStats, spacing: Option<f64>, h: f64) -> f64 {
+    params.smoothing.voxels(noise, spacing.map(|s| s / h))
 }
 
 /// The coarse pass ([`coarse_pass`]) checkpointed in the work directory; or, where a resumed
@@ -829,6 +853,13 @@ fn coarse_or_checkpoint(
         if c.occupied.iter().any(|k| k.level() != fine.leaf_level) {
             return Err(bad("an occupied leaf"));
         }
+        // A function of the statistics read back, as the pass computed it.
+        let sigma_vox = smoothing_on(
+            params,
+            &c.noise,
+            density.sample_spacing(),
+            plan.coarse_spacing(),
+        );
         log::info!(
             "{}: the coarse pass's results read back ({} occupied leaves)",
             path.display(),
@@ -842,8 +873,7 @@ fn coarse_or_checkpoint(
             support,
             iterations: c.iterations,
             point_weight: c.point_weight,
-            // A function of the statistics read back, as the pass computed it.
-            sigma_vox: params.smoothing.voxels(&c.noise),
+            sigma_vox,
             noise: c.noise,
         });
     }

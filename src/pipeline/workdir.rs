@@ -38,7 +38,8 @@ use super::reconstruct::ReconParams;
 use crate::error::{Error, IoContext, Result};
 use crate::io::atomic::{self, Durability};
 use crate::normals::{NormalParams, NormalsMode};
-use crate::recon::Plan;
+use crate::recon::screen::SPARSE_SPACINGS;
+use crate::recon::{Plan, Smoothing};
 use crate::store::Store;
 use crate::store::manifest::MANIFEST;
 
@@ -127,7 +128,17 @@ impl RunIdentity {
         let options = [
             ("command", "reconstruct".to_string()),
             ("--depth", params.depth.to_string()),
-            ("--smooth", params.smoothing.to_string()),
+            // The measured width's rules are part of it: a run before the sparse floor
+            // (`recon::screen::sparse_floor_voxels`) solved sparse samples otherwise.
+            (
+                "--smooth",
+                match params.smoothing {
+                    Smoothing::Measured => {
+                        format!("measured, at least {SPARSE_SPACINGS} of the samples' spacing")
+                    }
+                    fixed => fixed.to_string(),
+                },
+            ),
             ("--point-weight", params.point_weight.to_string()),
             ("--error", params.error.to_string()),
             ("--min-points", params.min_points.to_string()),

@@ -108,7 +108,7 @@ impl LeafSolvers {
         let fine = plan.leaf_fine_grid(CellKey::new(plan.leaf_level, [0; 3]));
         LeafSolvers {
             fine: Solver::new(&fine, plan.sigma_vox),
-            coarse: Solver::new(&leaf_coarse_grid(plan, &fine), plan.sigma_vox),
+            coarse: Solver::new(&leaf_coarse_grid(plan, &fine), plan.coarse_sigma_vox),
             gpu: None,
         }
     }

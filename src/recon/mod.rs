@@ -17,7 +17,9 @@
 //!    coarse spacing ([`density`]; Kazhdan, Bolitho, Hoppe 2006 §4.3): its normal is scaled
 //!    by it in every solve below, so that a part sampled 16 times more sparsely than the rest
 //!    makes the field jump as much and sits at the same iso-value.
-//! 1. A **coarse global solve** on the cube's `(N/r)³` coarse voxels (σ = 1 coarse voxel),
+//! 1. A **coarse global solve** on the cube's `(N/r)³` coarse voxels (a Gaussian of σ coarse
+//!    voxels, [`screen::Smoothing`]: every grid's own σ, at least 0.4 of the samples'
+//!    spacing on it where they are sparse against it, [`screen::sparse_floor_voxels`]),
 //!    padded on each side so that the periodic solve never wraps the surface: 4 coarse
 //!    voxels, plus what rounding the grid up to a 5-smooth size for the FFT adds (so 4 to 56
 //!    coarse voxels at the supported depths, [`Plan::coarse_pad`]). Coarse node `J`
@@ -27,6 +29,8 @@
 //!    periodic fine grid of `(2E)³` nodes (the cell embedded in a cube twice its size), and
 //!    on the coarse grid of the same domain, aligned to the global coarse grid ([`leaf`]).
 //!    Its **detail** is the difference, kept on the cell plus an overlap of `E/4` voxels.
+//!    The coarse local solve takes the width the coarse field was solved with (in coarse
+//!    voxels), the fine one its level's own.
 //!    Details are spilled to the work directory (zstd, [`checkpoint`]) and are the
 //!    checkpoint a resumed run reuses. A leaf whose samples lie within `--error` of the
 //!    coarse surface, or with fewer than `--min-points` samples, keeps no detail

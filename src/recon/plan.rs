@@ -122,6 +122,12 @@ pub struct Plan {
     pub tile_level: u32,
     /// Smoothing width in voxels.
     pub sigma_vox: f64,
+    /// Smoothing width of the coarse local solves, in coarse voxels: the width the coarse
+    /// field (the level above, or the dense solve) was solved with, which the coarse local
+    /// solve stands in for. Equal to `sigma_vox` but where sparse samples widen each grid's
+    /// Gaussian by its own spacing ([`crate::recon::screen::sparse_floor_voxels`]).
+    #[serde(default)]
+    pub coarse_sigma_vox: f64,
     /// Screening weight α (`--point-weight`; 0: the unscreened solve), see
     /// [`crate::recon::screen`].
     #[serde(default)]
@@ -167,6 +173,7 @@ impl Plan {
             tile,
             tile_level: depth - tile.trailing_zeros(),
             sigma_vox,
+            coarse_sigma_vox: sigma_vox,
             point_weight,
             noise_voxels: None,
             confidence: false,

@@ -810,14 +810,56 @@ fn the_screening_weight_follows_the_noise() {
             .into_iter()
             .chain(args.iter().copied())
             .collect();
-        let (w, measured, smooth) = weight(&recon(&plys[ply], &out, &args));
+        let summary = recon(&plys[ply], &out, &args);
+        let (w, measured, smooth) = weight(&summary);
         // The noise is measured whatever the weight (the vertex fit uses it).
         assert!(
             want.contains(&w) && measured,
             "{args:?}: --point-weight {w}"
         );
-        assert_eq!(smooth, [0.35, 1.0][ply], "{args:?}");
+        // 40,000 samples lie a voxel apart at depth 7: the precise sphere's 0.35 voxel
+        // widens to 0.4 of that (`the_gaussian_widens_for_samples_sparser_than_the_grid`).
+        let (spacing, _) = after(&summary, "the samples ");
+        assert!((0.9..1.15).contains(&spacing), "{summary}");
+        let want = [(0.4 * spacing).max(0.35), 1.0][ply];
+        assert!((smooth - want).abs() < 0.006, "{args:?}: {smooth} {want}");
     }
+}
+
+/// Samples sparser than the grid (`recon::screen::sparse_floor_voxels`): 12,000 noisy samples
+/// lie 5 voxels apart at depth 9, and each grid's Gaussian widens to 0.4 of the spacing on
+/// it (2.1 voxels on the leaves' grids). Measured: mean distance to the exact sphere 6.5·10⁻⁴
+/// against 7.3·10⁻⁴ with a fixed voxel; both one piece. (On 200,000 noisy samples at depth
+/// 11, 7 voxels apart, the fixed voxel broke the sphere into 309 pieces.)
+#[test]
+fn the_gaussian_widens_for_samples_sparser_than_the_grid() {
+    let d = tempfile::tempdir().unwrap();
+    let ply = synth(d.path(), "sphere", 12_000, 0.0005);
+    let truth = scanflow::synth::Truth::load(&d.path().join("sphere.truth.json")).unwrap();
+    let number_after = |summary: &str, label: &str| -> f64 {
+        let at = summary.find(label).expect(summary) + label.len();
+        let n: String = summary[at..]
+            .chars()
+            .take_while(|c| c.is_ascii_digit() || *c == '.')
+            .collect();
+        n.parse().expect(summary)
+    };
+    let mut means = Vec::new();
+    for args in [&["--depth", "9"][..], &["--depth", "9", "--smooth", "1"]] {
+        let out = d.path().join(format!("o{}.ply", args.len()));
+        let summary = recon(&ply, &out, args);
+        let spacing = number_after(&summary, "the samples ");
+        let smooth = number_after(&summary, "smoothed over ");
+        assert!((4.5..6.0).contains(&spacing), "{summary}");
+        let want = if args.len() == 2 { 0.4 * spacing } else { 1.0 };
+        assert!((smooth - want).abs() < 0.006, "{summary}");
+        let m = read_mesh(&out).unwrap();
+        let c = check_mesh(&m);
+        assert!(c.watertight && c.components == 1, "{args:?}: {c:?}");
+        let dist = scanflow::metrics::mesh_to_truth(&m, &truth, 20_000, 1);
+        means.push(0.5 * (dist.to_reference.mean + dist.from_reference.mean));
+    }
+    assert!(means[0] < 0.95 * means[1], "{means:?}");
 }
 
 /// Sampling-density weights (`recon::density`): a sphere whose x < 0 half keeps only every
