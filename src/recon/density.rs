@@ -295,12 +295,10 @@ mod tests {
         }
     }
 
-    #[test]
-    fn uniform_samples_weigh_one_and_a_sparser_half_weighs_its_ratio() {
-        // A uniformly sampled sphere (a Fibonacci lattice): every weight near 1, whatever
-        // the surface's slant through the grid.
-        let n = 40_000;
-        let sphere: Vec<[f64; 3]> = (0..n)
+    /// `n` samples spread uniformly (a Fibonacci lattice) over the sphere of radius 0.3
+    /// about the unit cube's centre.
+    fn fibonacci_sphere(n: usize) -> Vec<[f64; 3]> {
+        (0..n)
             .map(|i| {
                 let z = 1.0 - (2 * i + 1) as f64 / n as f64;
                 let r = (1.0 - z * z).sqrt();
@@ -311,7 +309,15 @@ mod tests {
                     0.5 + 0.3 * z,
                 ]
             })
-            .collect();
+            .collect()
+    }
+
+    #[test]
+    fn uniform_samples_weigh_one_and_a_sparser_half_weighs_its_ratio() {
+        // A uniformly sampled sphere (a Fibonacci lattice): every weight near 1, whatever
+        // the surface's slant through the grid.
+        let n = 40_000;
+        let sphere = fibonacci_sphere(n);
         let mut g = DensityGrid::new(&unit(), 16);
         g.add(&sphere);
         g.finish();
@@ -348,18 +354,7 @@ mod tests {
         // on coarse and fine grids: within 10%.
         assert_eq!(DensityGrid::new(&unit(), 16).sample_spacing(), None);
         for (n, cells) in [(40_000, 16), (40_000, 64), (2_000, 64), (200_000, 32)] {
-            let sphere: Vec<[f64; 3]> = (0..n)
-                .map(|i| {
-                    let z = 1.0 - (2 * i + 1) as f64 / n as f64;
-                    let r = (1.0 - z * z).sqrt();
-                    let a = i as f64 * std::f64::consts::PI * (3.0 - 5f64.sqrt());
-                    [
-                        0.5 + 0.3 * r * a.cos(),
-                        0.5 + 0.3 * r * a.sin(),
-                        0.5 + 0.3 * z,
-                    ]
-                })
-                .collect();
+            let sphere = fibonacci_sphere(n);
             let mut g = DensityGrid::new(&unit(), cells);
             g.add(&sphere);
             g.finish();
