@@ -355,7 +355,10 @@ impl Plane {
     /// twice its [`Plane::scale`] (the voxel `h`, or, for `precise` samples, their spacing
     /// where larger).
     fn fit(nb: &[Neighbour], h: f64, precise: bool) -> Option<Plane> {
-        if nb.len() < 3 {
+        // Only precise samples are fitted beyond two voxels: the others are refused before
+        // the covariance is summed, as before the sparse reach.
+        let far = nb.first().is_some_and(|x| x.0 > 4.0 * h * h);
+        if nb.len() < 3 || (far && !precise) {
             return None;
         }
         let k = nb.len() as f64;
@@ -392,10 +395,7 @@ impl Plane {
         // grid: the reach is then twice their spacing (`Plane::scale`), from the area their
         // spread along the plane covers.
         let mut scale = h;
-        if nb[0].0 > 4.0 * h * h {
-            if !precise {
-                return None;
-            }
+        if far {
             let mt = |a: [f64; 3], b: [f64; 3]| {
                 let mb = m * nalgebra::Vector3::new(b[0], b[1], b[2]);
                 a[0] * mb[0] + a[1] * mb[1] + a[2] * mb[2]
