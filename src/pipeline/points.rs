@@ -4,6 +4,8 @@
 
 use std::collections::{HashMap, HashSet};
 use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Instant;
 
 use rayon::prelude::*;
 
@@ -219,6 +221,13 @@ pub struct PointSource<'a> {
     summing: bool,
     /// Cells loaded weigh their normals ([`PointSource::for_positions`] turns it off).
     weigh: bool,
+    /// Store cells read so far, and their points, for the log.
+    reads: AtomicU64,
+    points_read: AtomicU64,
+    /// Of those, the cells read one at a time by a loading read, not by a preload, and the
+    /// nanoseconds those reads took.
+    serial_reads: AtomicU64,
+    serial_nanos: AtomicU64,
 }
 
 impl<'a> PointSource<'a> {
@@ -254,7 +263,47 @@ impl<'a> PointSource<'a> {
             density,
             summing: false,
             weigh: true,
+            reads: AtomicU64::new(0),
+            points_read: AtomicU64::new(0),
+            serial_reads: AtomicU64::new(0),
+            serial_nanos: AtomicU64::new(0),
         }
+    }
+
+    /// Store cells read from the store so far (each read again after the cache let it go).
+    pub fn cell_reads(&self) -> CellReads {
+        CellReads {
+            cells: self.reads.load(Ordering::Relaxed),
+            points: self.points_read.load(Ordering::Relaxed),
+            serial: self.serial_reads.load(Ordering::Relaxed),
+            serial_s: self.serial_nanos.load(Ordering::Relaxed) as f64 * 1e-9,
+        }
+    }
+
+    /// Log what stage `name` read since `before` ([`PointSource::cell_reads`]).
+    pub fn log_reads(&self, name: &str, before: CellReads) {
+        let now = self.cell_reads();
+        log::info!(
+            "{name}: {} store cells read ({} points; {} of the cells one at a time, {:.2} s) \
+             through a cache of {} MiB",
+            now.cells - before.cells,
+            now.points - before.points,
+            now.serial - before.serial,
+            now.serial_s - before.serial_s,
+            self.cap >> 20
+        );
+    }
+
+    /// The cache's cap in bytes.
+    pub fn cache_cap(&self) -> u64 {
+        self.cap
+    }
+
+    /// Set the cache's cap to `cap` bytes, letting the least recently used cells go where
+    /// it shrinks. Only speed depends on it, never the points read.
+    pub fn set_cache_cap(&mut self, cap: u64) {
+        self.cap = cap;
+        self.cache.set_capacity(cap);
     }
 
     /// The same source reading its dense store cells summed per voxel of the plan's lattice
@@ -298,13 +347,20 @@ impl<'a> PointSource<'a> {
         if let Some(c) = self.cache.get(&i) {
             return Ok(Arc::clone(c));
         }
+        let t = Instant::now();
         let c = Arc::new(self.load(i)?);
+        self.serial_reads.fetch_add(1, Ordering::Relaxed);
+        self.serial_nanos
+            .fetch_add(t.elapsed().as_nanos() as u64, Ordering::Relaxed);
         self.insert(i, Arc::clone(&c));
         Ok(c)
     }
 
     fn load(&self, i: usize) -> Result<SortedCell> {
         let mut b = self.store.read_cell(i)?;
+        self.reads.fetch_add(1, Ordering::Relaxed);
+        self.points_read
+            .fetch_add(b.len() as u64, Ordering::Relaxed);
         if self.weigh {
             super::reconstruct::weigh_normals(&mut b, self.plan.confidence, &self.density);
         }
@@ -326,7 +382,7 @@ impl<'a> PointSource<'a> {
     /// are read when asked for. The least recently used cells are evicted first to make room,
     /// so the cache and the cells being read stay within its cap. Only speed depends on this,
     /// never the points returned.
-    pub fn preload(&mut self, wanted: &[usize], pool: &rayon::ThreadPool) -> Result<()> {
+    fn preload(&mut self, wanted: &[usize], pool: &rayon::ThreadPool) -> Result<()> {
         let mut seen = HashSet::new();
         let mut missing = Vec::new();
         let mut est = 0u64;
@@ -334,17 +390,13 @@ impl<'a> PointSource<'a> {
             if self.cache.touch(&i) || !seen.insert(i) {
                 continue;
             }
-            // SortedCell::bytes of the cell's points, without colours.
-            est += self.store.manifest.cells[i].count * SORTED_POINT_BYTES;
+            est += self.cell_estimate(i);
             if est > self.cap / 2 {
                 break;
             }
             missing.push(i);
         }
-        let est: u64 = missing
-            .iter()
-            .map(|&i| self.store.manifest.cells[i].count * SORTED_POINT_BYTES)
-            .sum();
+        let est: u64 = missing.iter().map(|&i| self.cell_estimate(i)).sum();
         while !missing.is_empty() && self.cache.bytes() + est > self.cap {
             if self.cache.pop_oldest().is_none() {
                 break;
@@ -356,6 +408,36 @@ impl<'a> PointSource<'a> {
             self.insert(i, Arc::new(c?));
         }
         Ok(())
+    }
+
+    /// [`SortedCell::bytes`] of store cell `i`'s points without colours: what
+    /// [`PointSource::preload`] plans with.
+    fn cell_estimate(&self, i: usize) -> u64 {
+        self.store.manifest.cells[i].count * SORTED_POINT_BYTES
+    }
+
+    /// The end of the run of `items` from `start` whose cells (`cells` of each) not cached
+    /// yet fit what [`PointSource::preload`] reads at once, half the cache; a run holds at
+    /// least one item.
+    fn run_end<I>(
+        &self,
+        items: &[I],
+        start: usize,
+        cells: impl Fn(&Self, &I) -> Vec<usize>,
+    ) -> usize {
+        let mut seen = HashSet::new();
+        let mut est = 0u64;
+        for (n, item) in items.iter().enumerate().skip(start) {
+            for i in cells(self, item) {
+                if !self.cache.contains(&i) && seen.insert(i) {
+                    est += self.cell_estimate(i);
+                }
+            }
+            if n > start && est > self.cap / 2 {
+                return n;
+            }
+        }
+        items.len()
     }
 
     /// The leaf-level cells meeting box `bx` (world), z slowest.
@@ -396,7 +478,7 @@ impl<'a> PointSource<'a> {
 
     /// The store cells [`PointSource::near_points_wave`] reads first for the box `lo..hi` and
     /// `margin`.
-    pub fn cells_near(&self, lo: [f64; 3], hi: [f64; 3], margin: f64) -> Vec<usize> {
+    fn cells_near(&self, lo: [f64; 3], hi: [f64; 3], margin: f64) -> Vec<usize> {
         let bx = Aabb { min: lo, max: hi }.grown(margin);
         self.keys_in(&bx)
             .into_iter()
@@ -405,7 +487,7 @@ impl<'a> PointSource<'a> {
     }
 
     /// The store cells [`PointSource::gather_wave`] reads for leaf `key`.
-    pub fn cells_for_leaf(&self, key: CellKey) -> Vec<usize> {
+    fn cells_for_leaf(&self, key: CellKey) -> Vec<usize> {
         Self::neighbours(key)
             .into_iter()
             .flat_map(|k| self.covering(k))
@@ -421,9 +503,12 @@ impl<'a> PointSource<'a> {
         pool: &rayon::ThreadPool,
         boxes: &[([f64; 3], [f64; 3], f64)],
     ) -> Result<Vec<NearPoints>> {
-        self.read_wave(pool, boxes, |acc, &(lo, hi, margin)| {
-            acc.near_points(lo, hi, margin)
-        })
+        self.read_wave(
+            pool,
+            boxes,
+            |src, &(lo, hi, margin)| src.cells_near(lo, hi, margin),
+            |acc, &(lo, hi, margin)| acc.near_points(lo, hi, margin),
+        )
     }
 
     /// The points (with their colours) within Euclidean distance `reach` of the box `lo..hi`
@@ -457,41 +542,68 @@ impl<'a> PointSource<'a> {
         pool: &rayon::ThreadPool,
         keys: &[CellKey],
     ) -> Result<Vec<LeafPoints>> {
-        self.read_wave(pool, keys, |acc, &key| acc.gather(key))
+        self.read_wave(
+            pool,
+            keys,
+            |src, &key| src.cells_for_leaf(key),
+            |acc, &key| acc.gather(key),
+        )
     }
 
-    /// `read` of every item of a wave, after its [`PointSource::preload`]: in parallel on
-    /// `pool` from the cache alone, then, in order, loading the cells for the items whose
-    /// cells the preload left out (over its share of the cache, or a margin widened past
-    /// them). Both read the same cells in the same order: the results of reading each item
-    /// in turn.
+    /// `read` of every item of a wave, in runs of consecutive items whose cells (`cells` of
+    /// each) fit half the cache: a run's cells read in parallel ([`PointSource::preload`]),
+    /// then its items read on `pool` from the cache alone, then, in order, loading the cells
+    /// for the items whose cells the preload left out (a single item over half the cache, or
+    /// a margin widened past them). Both read the same cells in the same order: the results
+    /// of reading each item in turn. (One preload for a whole wave left most of a wave's cells
+    /// to the serial reads on 16 cores: a 100M-point sphere's leaves read 3× slower than on
+    /// 2.)
     fn read_wave<I: Sync, T: Send>(
         &mut self,
         pool: &rayon::ThreadPool,
         items: &[I],
+        cells: impl Fn(&Self, &I) -> Vec<usize>,
         read: impl Fn(&mut Access<'_, 'a>, &I) -> Result<Option<T>> + Sync,
     ) -> Result<Vec<T>> {
-        let cached: Vec<Result<Option<T>>> = {
-            let shared: &PointSource<'a> = self;
-            pool.install(|| {
-                items
-                    .par_iter()
-                    .map(|item| read(&mut Access::Cached(shared), item))
-                    .collect()
-            })
-        };
-        items
-            .iter()
-            .zip(cached)
-            .map(|(item, got)| match got? {
-                Some(t) => Ok(t),
-                None => {
-                    Ok(read(&mut Access::Load(self), item)?
-                        .expect("a loading read finds every cell"))
-                }
-            })
-            .collect()
+        let mut out = Vec::with_capacity(items.len());
+        let mut start = 0;
+        while start < items.len() {
+            let end = self.run_end(items, start, &cells);
+            let run = &items[start..end];
+            let wanted: Vec<usize> = run.iter().flat_map(|item| cells(self, item)).collect();
+            self.preload(&wanted, pool)?;
+            let cached: Vec<Result<Option<T>>> = {
+                let shared: &PointSource<'a> = self;
+                pool.install(|| {
+                    run.par_iter()
+                        .map(|item| read(&mut Access::Cached(shared), item))
+                        .collect()
+                })
+            };
+            for (item, got) in run.iter().zip(cached) {
+                out.push(match got? {
+                    Some(t) => t,
+                    None => read(&mut Access::Load(self), item)?
+                        .expect("a loading read finds every cell"),
+                });
+            }
+            start = end;
+        }
+        Ok(out)
     }
+}
+
+/// Counts of a [`PointSource`]'s reads of store cells, for the log.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct CellReads {
+    /// Store cells read (a cell the cache let go is read again).
+    pub cells: u64,
+    /// Their points.
+    pub points: u64,
+    /// Of the cells, those read one at a time by a loading read, not by a parallel preload.
+    pub serial: u64,
+    /// The seconds those took.
+    pub serial_s: f64,
 }
 
 /// How a read reaches the store cells: loading what the cache lacks (and caching it), or

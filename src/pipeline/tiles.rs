@@ -6,6 +6,7 @@
 use std::collections::{BTreeSet, HashMap, HashSet};
 use std::path::Path;
 use std::sync::{Arc, Mutex};
+use std::time::Instant;
 
 use rayon::prelude::*;
 
@@ -157,6 +158,10 @@ pub fn run(
         detail_bytes: details.detail_bytes(),
     };
     let mut tiles_done = 0usize;
+    let reads_before = match points.as_ref() {
+        Some(src) => lock(src)?.cell_reads(),
+        None => Default::default(),
+    };
     let order = shard.order(tiles.len());
     let claims = Claims::new(job.claims_dir);
     // A split run claims its tiles, then does every one still missing; one another shard
@@ -207,6 +212,9 @@ pub fn run(
     }
     if shard.is_split() {
         stage.inc(visited.iter().filter(|v| !**v).count() as u64);
+    }
+    if let Some(src) = points.as_ref() {
+        lock(src)?.log_reads("tiles", reads_before);
     }
     stage.finish(None);
     if gpu.is_some() {
@@ -593,16 +601,11 @@ fn load_wave(
         .filter(|(_, done)| !**done)
         .map(|(w, _)| w)
         .collect();
-    // The tiles' near points: their cells preloaded, then read by the workers.
+    // The tiles' near points, read by the workers.
     let near_todo: Vec<NearPoints> = match points.as_ref() {
         Some(src) => {
             let boxes: Vec<_> = todo.iter().map(|(_, lo, _)| near_box(plan, *lo)).collect();
             let mut src = lock(src)?;
-            let wanted: Vec<usize> = boxes
-                .iter()
-                .flat_map(|&(a, b, margin)| src.cells_near(a, b, margin))
-                .collect();
-            src.preload(&wanted, &ctx.pool)?;
             let near = src.near_points_wave(&ctx.pool, &boxes)?;
             ctx.pool.install(|| {
                 near.into_par_iter()
@@ -811,15 +814,20 @@ fn extract_gpu(
     let plan = job.plan;
     let own = pou::leaf_weights(plan.leaf_voxels as i64, plan.overlap_voxels as i64);
     let done: Vec<Slot> = w.loaded.iter().map(|_| Mutex::new(None)).collect();
+    let start = Instant::now();
     let (tx, rx) = crossbeam_channel::bounded::<(usize, Result<TileMesh>)>(GPU_QUEUE);
     std::thread::scope(|s| -> Result<()> {
         let (loaded, own, geom) = (w.loaded, &own, w.geom);
+        let gpu_totals = &mut *gpu_totals;
         s.spawn(move || {
             for (i, (_, lo, ds)) in loaded.iter().enumerate() {
                 let Some(ds) = ds else { continue };
                 let mut mesh = TileMesh::default();
                 // The host side of the GPU call uses rayon: keep it on our pool.
-                let r = tile_blend(plan, own, job.coarse, job.unit, *lo, ds).and_then(|b| {
+                let t0 = Instant::now();
+                let b = tile_blend(plan, own, job.coarse, job.unit, *lo, ds);
+                gpu_totals.blend += t0.elapsed().as_secs_f64();
+                let r = b.and_then(|b| {
                     pool.install(|| g.extract_blend(&b, job.iso as f32, geom, &mut mesh))
                         .map(|st| {
                             gpu_totals.add(&st);
@@ -850,6 +858,7 @@ fn extract_gpu(
         });
         Ok(())
     })?;
+    gpu_totals.waves += start.elapsed().as_secs_f64();
     Ok(done
         .into_iter()
         .map(|d| {
@@ -869,7 +878,14 @@ struct GpuTotals {
     fell_back: u64,
     leaves_sent: u64,
     bytes: u64,
-    secs: f64,
+    upload: f64,
+    kernels: f64,
+    download: f64,
+    host: f64,
+    /// The feeding thread's time building blend tables on the host.
+    blend: f64,
+    /// Wall time of the waves' GPU extraction (feeding and finishing together).
+    waves: f64,
 }
 
 impl GpuTotals {
@@ -879,15 +895,26 @@ impl GpuTotals {
         self.fell_back += s.fell_back as u64;
         self.leaves_sent += s.leaves_sent;
         self.bytes += s.upload_bytes;
-        self.secs += s.upload_secs + s.kernel_secs + s.download_secs + s.host_secs;
+        self.upload += s.upload_secs;
+        self.kernels += s.kernel_secs;
+        self.download += s.download_secs;
+        self.host += s.host_secs;
     }
 
     fn log(&self) {
         log::info!(
-            "GPU: {} tiles in {:.2} s, {} with the field built on the device, {} on the CPU \
-             after a GPU failure; {} leaf grids and {:.1} MB sent",
+            "GPU: {} tiles in {:.2} s (upload {:.2} s, kernels {:.2} s, read-back {:.2} s, host \
+             {:.2} s; blend tables on the host {:.2} s) of the waves' {:.2} s, {} with the field \
+             built on the device, {} on the CPU after a GPU failure; {} leaf grids and {:.1} MB \
+             sent",
             self.tiles,
-            self.secs,
+            self.upload + self.kernels + self.download + self.host,
+            self.upload,
+            self.kernels,
+            self.download,
+            self.host,
+            self.blend,
+            self.waves,
             self.on_device,
             self.fell_back,
             self.leaves_sent,
