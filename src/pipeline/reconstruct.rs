@@ -534,9 +534,10 @@ const POINT_CACHE_PER_WORKER: u64 = 32 << 20;
 
 /// Grow `src`'s cache for a leaf pass of `workers` (towards [`POINT_CACHE_PER_WORKER`] a
 /// worker) out of what the budget has free beyond a whole wave of their solves (`fine_bytes`
-/// each) and its points (as much again as the cache): only memory the wave would leave
-/// unused, so the waves and the plan are unchanged. Returns the cap to restore and the permit
-/// holding the growth, or `None` where there is no room. Only speed depends on it.
+/// each) and its points (taken as twice the cache): only memory the wave would leave unused,
+/// so the waves and the plan are unchanged. A growth under a quarter of the cap is not taken.
+/// Returns the cap to restore and the permit holding the growth, or `None` where there is no
+/// room. Only speed depends on it.
 fn grow_point_cache(
     src: &mut PointSource,
     workers: usize,
