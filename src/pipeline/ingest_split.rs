@@ -44,7 +44,9 @@ use crate::normals::{self, CellResult, Signs};
 use crate::store::assemble::{self, Pack};
 use crate::store::count::{first_cube, recount_cube};
 use crate::store::manifest::{CellEntry, MANIFEST, Manifest};
-use crate::store::{CELLS_DIR, Found, Partial, Prepared, StageDir, Staged, cell_entry};
+use crate::store::{
+    CELLS_DIR, Found, NormalsMode, Partial, Prepared, StageDir, Staged, cell_entry,
+};
 
 /// Most points per input chunk of a split ingest (45 MiB in flight a chunk): one process's
 /// largest chunk.
@@ -130,7 +132,7 @@ pub fn ingest_split(
     work: &Path,
     ctx: &Ctx,
 ) -> Result<SplitOutcome> {
-    if complete(out, inputs)? {
+    if complete(out, inputs, params)? {
         // A task killed between the commit and the removal leaves the work directory.
         if workdir::is_work_dir(work) {
             let _ = workdir::remove_owned(work);
@@ -186,7 +188,7 @@ pub fn ingest_split(
     let outcome = match run {
         Ok(st) => SplitOutcome::Committed(st),
         // Another task committed the store and removed the work directory under this one.
-        Err(_) if complete(out, inputs)? => SplitOutcome::Done,
+        Err(_) if complete(out, inputs, params)? => SplitOutcome::Done,
         Err(e) => return Err(e),
     };
     // The store is complete: nothing in the work directory is needed any more. A task still
@@ -205,9 +207,11 @@ pub fn ingest_split(
     Ok(outcome)
 }
 
-/// Whether `out` is a complete store of `inputs` (a task arriving after the commit); an error
-/// when something else is there.
-fn complete(out: &Path, inputs: &[InputSpec]) -> Result<bool> {
+/// Whether `out` is a complete store of `inputs` made with `params` (a task arriving after
+/// the commit); an error when something else is there, naming the option that differs: a
+/// task of another run that arrives after the first run's tasks have finished must fail as
+/// it would have while they ran.
+fn complete(out: &Path, inputs: &[InputSpec], params: &IngestParams) -> Result<bool> {
     if !out.exists() {
         return Ok(false);
     }
@@ -231,6 +235,39 @@ fn complete(out: &Path, inputs: &[InputSpec]) -> Result<bool> {
         return Err(Error::input(
             out,
             "output store already exists and was made from other inputs; remove it or choose another -o",
+        ));
+    }
+    let mut differ = Vec::new();
+    if m.max_cell_points != params.max_cell_points {
+        differ.push(format!(
+            "--max-cell-points {} there, {} here",
+            m.max_cell_points, params.max_cell_points
+        ));
+    }
+    match (&m.estimated_normals, params.normals) {
+        (Some(_), NormalsMode::Use) => {
+            differ.push("--normals: estimated there, the inputs' here".to_string())
+        }
+        (None, NormalsMode::Estimate) => {
+            differ.push("--normals: the inputs' there, estimated here".to_string())
+        }
+        (Some(e), _) if e.k != params.normal_params.k => differ.push(format!(
+            "--neighbours {} there, {} here",
+            e.k, params.normal_params.k
+        )),
+        (Some(e), _) if e.robust != params.normal_params.robust => differ.push(format!(
+            "--robust-normals {} there, {} here",
+            e.robust, params.normal_params.robust
+        )),
+        _ => {}
+    }
+    if !differ.is_empty() {
+        return Err(Error::input(
+            out,
+            format!(
+                "output store already exists and was made with other options ({}); remove it or choose another -o",
+                differ.join("; ")
+            ),
         ));
     }
     Ok(true)
