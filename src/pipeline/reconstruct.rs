@@ -526,37 +526,6 @@ fn plan_run(store: &Store, params: &ReconParams, ctx: &Ctx) -> Result<Vec<Plan>>
     Ok(levels)
 }
 
-/// The point cache a leaf pass's workers want: [`POINT_CACHE_PER_WORKER`] each, at least
-/// the plan's cap. A wave's store cells are read in parallel as far as half the cache holds
-/// them ([`PointSource`]); store cells hold up to a million points (about 28 MB sorted), so the
-/// plan's 128 MiB read two at once and 16 workers waited on the rest.
-const POINT_CACHE_PER_WORKER: u64 = 32 << 20;
-
-/// Grow `src`'s cache for a leaf pass of `workers` (towards [`POINT_CACHE_PER_WORKER`] a
-/// worker) out of what the budget has free beyond a whole wave of their solves (`fine_bytes`
-/// each) and its points (taken as twice the cache): only memory the wave would leave unused,
-/// so the waves and the plan are unchanged. A growth under a quarter of the cap is not taken.
-/// Returns the cap to restore and the permit holding the growth, or `None` where there is no
-/// room. Only speed depends on it.
-fn grow_point_cache(
-    src: &mut PointSource,
-    workers: usize,
-    fine_bytes: u64,
-    ctx: &Ctx,
-) -> Option<(u64, Permit)> {
-    let cap = src.cache_cap();
-    let want = (POINT_CACHE_PER_WORKER * workers as u64).saturating_sub(cap);
-    let free = ctx.budget.total().saturating_sub(ctx.budget.used());
-    let room = free.saturating_sub(workers as u64 * fine_bytes + 2 * cap);
-    let grow = want.min(room);
-    if grow < cap / 4 {
-        return None;
-    }
-    let permit = ctx.budget.try_acquire(grow)?;
-    src.set_cache_cap(cap + grow);
-    Some((cap, permit))
-}
-
 /// What a budget of `total` bytes gives the grids ([`Share`]): the coarse solve's scratch its
 /// slice, and the coarse solution with one leaf solve what the point cache leaves.
 fn plan_budget(total: u64) -> PlanBudget {
@@ -1009,7 +978,8 @@ fn leaf_pass(
     let pool = gpu_pool.as_ref().unwrap_or(&ctx.pool);
     let workers = pool.current_num_threads();
     let wave = 2 * workers;
-    let growth = grow_point_cache(src, workers, fine_bytes, ctx);
+    // Room for a whole wave of solves and its points (as much as twice the plan's cache).
+    let growth = src.grow_cache(workers as u64 * fine_bytes, ctx);
     for &claiming in params.shard.passes() {
         let mut next = 0;
         loop {
@@ -1131,9 +1101,7 @@ fn leaf_pass(
         );
     }
     src.log_reads(stage_name, reads_before);
-    if let Some((cap, _)) = &growth {
-        src.set_cache_cap(*cap);
-    }
+    src.end_growth(growth);
     stage.finish(None);
     let iso = if iso_count > 0 {
         iso_sum / iso_count as f64

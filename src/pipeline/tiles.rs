@@ -162,6 +162,17 @@ pub fn run(
         Some(src) => lock(src)?.cell_reads(),
         None => Default::default(),
     };
+    // The cache grows into what two waves leave free: their tiles, each with the details of
+    // every leaf its box and their overlaps meet (a tile spans whole leaves, plus one each
+    // side).
+    let growth = match points.as_ref() {
+        Some(src) => {
+            let near = (plan.tile / plan.leaf_voxels + 2).pow(3);
+            let wave = sizes.tiles as u64 * (sizes.tile_bytes + near * sizes.detail_bytes);
+            lock(src)?.grow_cache(2 * wave, ctx)
+        }
+        None => None,
+    };
     let order = shard.order(tiles.len());
     let claims = Claims::new(job.claims_dir);
     // A split run claims its tiles, then does every one still missing; one another shard
@@ -214,7 +225,9 @@ pub fn run(
         stage.inc(visited.iter().filter(|v| !**v).count() as u64);
     }
     if let Some(src) = points.as_ref() {
-        lock(src)?.log_reads("tiles", reads_before);
+        let mut src = lock(src)?;
+        src.log_reads("tiles", reads_before);
+        src.end_growth(growth);
     }
     stage.finish(None);
     if gpu.is_some() {

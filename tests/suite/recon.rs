@@ -582,6 +582,71 @@ fn levels_of_leaves_match_one_global_solve_and_keep_the_contracts() {
     assert!(std::fs::read(&kept).unwrap() == want);
 }
 
+/// The store cells each pass read, from the log lines "STAGE: N store cells read (...)".
+fn cell_reads(stderr: &str) -> Vec<(String, usize)> {
+    stderr
+        .lines()
+        .filter_map(|l| {
+            let (stage, rest) = l.strip_prefix("scanflow: info: ")?.split_once(": ")?;
+            let n = rest
+                .strip_suffix(" MiB")?
+                .split_once(" store cells read")?
+                .0;
+            Some((stage.to_string(), n.parse().ok()?))
+        })
+        .collect()
+}
+
+#[test]
+fn no_pass_reads_a_store_cell_twice_where_the_cache_holds_the_store() {
+    // 2M points in cells of at most 25,000 (72 MB sorted) under --mem 1G: the point cache
+    // holds the store, so the leaves read every cell once and the tiles (which read only
+    // for the vertices they fit: none here) each at most once, however the waves split their reads into
+    // runs. (A cache that lets cells go reads a 100M-point store many times over: 9 times in
+    // the finest leaves, 15 in the tiles, before the passes grew it; no store small enough
+    // for the tests passes the plan's 128 MiB.)
+    let d = tempfile::tempdir().unwrap();
+    let ply = synth(d.path(), "sphere", 2_000_000, 0.0005);
+    let store = d.path().join("s");
+    ok(&[
+        "ingest",
+        s(&ply),
+        "-o",
+        s(&store),
+        "--max-cell-points",
+        "25000",
+        "--progress",
+        "none",
+    ]);
+    let cells = scanflow::store::Store::open(&store)
+        .unwrap()
+        .manifest
+        .cells
+        .len();
+    let out = d.path().join("m.ply");
+    let o = run(&[
+        "reconstruct",
+        s(&store),
+        "-o",
+        s(&out),
+        "--depth",
+        "8",
+        "--mem",
+        "1G",
+        "--threads",
+        "2",
+        "--progress",
+        "none",
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    let reads = cell_reads(&err);
+    let of = |stage: &str| reads.iter().find(|r| r.0 == stage).map(|r| r.1);
+    assert_eq!(of("leaves"), Some(cells), "{err}");
+    let tiles = of("tiles").unwrap_or_else(|| panic!("no tiles' reads logged: {err}"));
+    assert!(tiles <= cells, "{tiles} of {cells}: {err}");
+}
+
 #[test]
 fn reconstruct_stays_under_mem_plus_margin() {
     // The demo's input (a 1M-point bumpy sphere, noise 0.001) at depth 9 on 2 threads, with
