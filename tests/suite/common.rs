@@ -43,6 +43,14 @@ pub fn ok(args: &[&str]) -> String {
     String::from_utf8_lossy(&o.stdout).into_owned()
 }
 
+/// Run and require success; return stderr (the log, warnings and progress lines).
+pub fn ok_log(args: &[&str]) -> String {
+    let o = run(args);
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert!(o.status.success(), "scanflow {args:?} failed:\n{err}");
+    err
+}
+
 /// Run, require a clean failure (exit 1, no panic), return stderr.
 pub fn fails(args: &[&str]) -> String {
     let o = run(args);
