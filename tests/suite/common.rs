@@ -43,6 +43,20 @@ pub fn ok(args: &[&str]) -> String {
     String::from_utf8_lossy(&o.stdout).into_owned()
 }
 
+/// Ingest `input` into the store `store` in cells of at most `max_cell_points` points.
+pub fn ingest_in_cells(input: &Path, store: &Path, max_cell_points: u64) {
+    ok(&[
+        "ingest",
+        s(input),
+        "-o",
+        s(store),
+        "--max-cell-points",
+        &max_cell_points.to_string(),
+        "--progress",
+        "none",
+    ]);
+}
+
 /// Run and require success; return stderr (the log, warnings and progress lines).
 pub fn ok_log(args: &[&str]) -> String {
     let o = run(args);

@@ -34,16 +34,7 @@ fn every_shared_point_file_ingests_with_its_count() {
     for (i, (rel, n)) in COUNTS.iter().enumerate() {
         let Some(p) = shared(rel) else { return };
         let store = d.path().join(format!("{i}.store"));
-        ok(&[
-            "ingest",
-            s(&p),
-            "-o",
-            s(&store),
-            "--max-cell-points",
-            "20000",
-            "--progress",
-            "none",
-        ]);
+        ingest_in_cells(&p, &store, 20000);
         let info: serde_json::Value =
             serde_json::from_str(&ok(&["info", s(&store), "--json"])).unwrap();
         assert_eq!(info["points"].as_u64(), Some(*n), "{rel}");

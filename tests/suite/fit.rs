@@ -278,16 +278,7 @@ fn a_closed_scan_and_a_store_fit_by_patches() {
     };
     let d = tempfile::tempdir().unwrap();
     let store = d.path().join("store");
-    ok(&[
-        "ingest",
-        s(&zip),
-        "-o",
-        s(&store),
-        "--max-cell-points",
-        "5000",
-        "--progress",
-        "none",
-    ]);
+    ingest_in_cells(&zip, &store, 5000);
     for (input, name) in [(&zip, "file"), (&store, "store")] {
         let igs = d.path().join(format!("{name}.igs"));
         let rep = d.path().join(format!("{name}.json"));

@@ -19,16 +19,7 @@ fn sphere_round_trip_and_info() {
         s(&ply),
     ]);
     assert!(d.path().join("s.truth.json").exists());
-    ok(&[
-        "ingest",
-        s(&ply),
-        "-o",
-        s(&store),
-        "--max-cell-points",
-        "4000",
-        "--progress",
-        "none",
-    ]);
+    ingest_in_cells(&ply, &store, 4000);
     let st = Store::open(&store).unwrap();
     assert_eq!(st.manifest.point_count, 100_000);
     assert!(st.manifest.attributes.normal);

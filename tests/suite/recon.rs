@@ -608,16 +608,7 @@ fn no_pass_reads_a_store_cell_twice_where_the_cache_holds_the_store() {
     let d = tempfile::tempdir().unwrap();
     let ply = synth(d.path(), "sphere", 2_000_000, 0.0005);
     let store = d.path().join("s");
-    ok(&[
-        "ingest",
-        s(&ply),
-        "-o",
-        s(&store),
-        "--max-cell-points",
-        "25000",
-        "--progress",
-        "none",
-    ]);
+    ingest_in_cells(&ply, &store, 25000);
     let cells = scanflow::store::Store::open(&store)
         .unwrap()
         .manifest

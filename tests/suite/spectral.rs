@@ -188,16 +188,7 @@ fn filter_gives_the_same_bytes_for_any_thread_count() {
     let (ply, _) = synth(d.path(), "torus", 40_000, 0.003);
     let store = d.path().join("store");
     // Small cells: patches reach across cell faces through the halo.
-    ok(&[
-        "ingest",
-        s(&ply),
-        "-o",
-        s(&store),
-        "--max-cell-points",
-        "6000",
-        "--progress",
-        "none",
-    ]);
+    ingest_in_cells(&ply, &store, 6000);
     let mut outs = Vec::new();
     for t in ["1", "2", "3"] {
         let out = d.path().join(format!("f{t}.ply"));

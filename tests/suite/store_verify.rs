@@ -30,16 +30,7 @@ pub fn make_store(dir: &Path) -> PathBuf {
     let xyz = dir.join("sphere.xyz");
     write_sphere_xyz(&xyz, 4000);
     let st = dir.join("sphere.store");
-    ok(&[
-        "ingest",
-        s(&xyz),
-        "-o",
-        s(&st),
-        "--max-cell-points",
-        "400",
-        "--progress",
-        "none",
-    ]);
+    ingest_in_cells(&xyz, &st, 400);
     std::fs::remove_file(&xyz).unwrap();
     st
 }
