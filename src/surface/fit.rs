@@ -6,6 +6,7 @@ use super::colour::{COLOUR_NEIGHBOURS, blend_colour};
 use super::point_grid::PointGrid;
 use crate::geom::frame::plane_basis;
 use crate::normals::estimate::least_eigenvector;
+use crate::recon::screen::PRECISE_WITHIN_VOXELS;
 use crate::types::{EdgeKey, GridGeom};
 
 /// Input points whose plane a vertex is moved onto (`fit`).
@@ -234,7 +235,7 @@ fn project_plane(
 ) -> ([f64; 3], Option<(Plane, f64)>) {
     let mut p = v;
     p[axis] = clamp_to_edge(v[axis], edge);
-    let Some(plane) = Plane::fit(nb, h, noise < SPARSE_FIT_NOISE_VOXELS * h) else {
+    let Some(plane) = Plane::fit(nb, h, precise(noise, h)) else {
         return (p, None);
     };
     let off = plane.offset(v);
@@ -306,7 +307,7 @@ struct Plane {
     /// left most vertices unfitted: the 1M-point bumpy sphere at depth 12 came out 2.9·10⁻⁵
     /// off (3.6 without any fit) where depth 10 gives 1.9·10⁻⁶. The spread is the
     /// neighbours' own, so a vertex over a hole, whose neighbours lie to one side of it,
-    /// stays unfitted. Only for precise samples ([`SPARSE_FIT_NOISE_VOXELS`]): noisy ones
+    /// stays unfitted. Only for precise samples ([`precise`]): noisy ones
     /// that sparse are fitted over discs of a dozen voxels whose curvature the plane misses
     /// and the noise hides from the jet's test (12,000 samples with noise 0.0005 at depth
     /// 9, 5 voxels apart: 1.1·10⁻³ mean distance against 6.5·10⁻⁴ unfitted), and the
@@ -342,10 +343,15 @@ const NOISE_SPAN: f64 = 3.0;
 /// still take jets (module docs of [`super`]).
 const JET_F_RATIO: f64 = 20.0;
 
-/// The measured noise across the surface (in voxels) under which a vertex whose samples lie
-/// farther apart than two voxels is still fitted to them (`Plane::scale`); 0, unknown,
-/// counts as precise. The reconstruction's own threshold for precise samples.
-pub const SPARSE_FIT_NOISE_VOXELS: f64 = 0.05;
+/// Whether samples of the measured `noise` (input units; 0 where it could not be measured)
+/// are precise for a grid of spacing `h`: under the reconstruction's one threshold,
+/// [`PRECISE_WITHIN_VOXELS`] of spread within fine voxels. Only these are fitted beyond
+/// two voxels (`Plane::scale`). Unmeasured noise counts as precise here (the screening
+/// weight takes it as not: [`crate::recon::screen::noise_limit`]): it goes unmeasured
+/// where no fine voxel holds two samples, exactly the sparse samples the reach is for.
+fn precise(noise: f64, h: f64) -> bool {
+    noise < PRECISE_WITHIN_VOXELS * h
+}
 
 /// Fewest neighbours for a jet (six unknowns, and a residual left to judge them by).
 const JET_MIN_NEIGHBOURS: usize = 10;
