@@ -304,7 +304,8 @@ impl<'a> PointSource<'a> {
     }
 
     /// Grow the cache for one pass out of what the budget has free beyond `reserve` (the
-    /// pass's own waves) and twice the cache (a wave's points copied out of it), as far as
+    /// pass's own waves), twice the cache (a wave's points copied out of it) and a store cell
+    /// being read by each worker, as far as
     /// every store cell at once; a growth under a quarter of the cap is not taken. Only speed
     /// depends on it: a pass in Morton order meets a store cell again as the boxes of leaves
     /// or tiles on the far side of an octant boundary reach into it, and a cache that lets it
@@ -319,8 +320,14 @@ impl<'a> PointSource<'a> {
         let cells = self.store.manifest.cells.len();
         let whole: u64 = (0..cells).map(|i| self.cell_estimate(i)).sum();
         let want = whole.saturating_sub(cap);
+        // Besides: a cell being read by each worker, decoded beside the sorted copy the cache
+        // counts, with its points' leaf keys and order (12 bytes a point).
+        let largest = self.store.manifest.cells.iter().map(|c| c.count).max();
+        let decoding = ctx.threads() as u64
+            * largest.unwrap_or(0)
+            * (super::reconstruct::BATCH_POINT_BYTES + 12);
         let free = ctx.budget.total().saturating_sub(ctx.budget.used());
-        let room = free.saturating_sub(reserve + 2 * cap);
+        let room = free.saturating_sub(reserve + 2 * cap + decoding);
         let grow = want.min(room);
         if grow < cap / 4 {
             return None;

@@ -38,10 +38,10 @@ use crate::types::{CellKey, PointBatch};
 
 /// Bytes a decoded store point holds while the coarse pass splats it: position f64×3 (24),
 /// normal f32×3 (12), colour u16×4 (8), intensity f32 (4), confidence f32 (4).
-const BATCH_POINT_BYTES: u64 = 52;
+pub(super) const BATCH_POINT_BYTES: u64 = 52;
 
-/// The most the cache of sorted store cells holds, whatever the budget: leaves in Morton order
-/// need only the store cells around them.
+/// The most the plan gives the cache of sorted store cells, whatever the budget; a pass with
+/// room grows it for its length ([`PointSource::grow_cache`]).
 const POINT_CACHE_MAX_BYTES: u64 = 128 << 20;
 
 /// The fewest points a solve accepts.
