@@ -305,8 +305,8 @@ impl<'a> PointSource<'a> {
 
     /// Grow the cache for one pass out of what the budget has free beyond `reserve` (the
     /// pass's own waves), twice the cache (a wave's points copied out of it) and a store cell
-    /// being read by each worker, as far as
-    /// every store cell at once; a growth under a quarter of the cap is not taken. Only speed
+    /// being read by each worker, as far as every store cell at once; a growth under a
+    /// quarter of the cap is not taken. Only speed
     /// depends on it: a pass in Morton order meets a store cell again as the boxes of leaves
     /// or tiles on the far side of an octant boundary reach into it, and a cache that lets it
     /// go in between reads it again. (Growing to 32 MiB a worker was too little: on 2 cores a
