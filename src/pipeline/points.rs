@@ -273,7 +273,7 @@ impl<'a> PointSource<'a> {
     }
 
     /// Store cells read from the store so far (each read again after the cache let it go).
-    pub fn cell_reads(&self) -> CellReads {
+    fn cell_reads(&self) -> CellReads {
         CellReads {
             cells: self.reads.load(Ordering::Relaxed),
             points: self.points_read.load(Ordering::Relaxed),
@@ -283,7 +283,7 @@ impl<'a> PointSource<'a> {
     }
 
     /// Log what stage `name` read since `before` ([`PointSource::cell_reads`]).
-    pub fn log_reads(&self, name: &str, before: CellReads) {
+    fn log_reads(&self, name: &str, before: CellReads) {
         let now = self.cell_reads();
         log::info!(
             "{name}: {} store cells read ({} points; {} of the cells one at a time, {:.2} s) \
@@ -298,24 +298,41 @@ impl<'a> PointSource<'a> {
 
     /// Set the cache's cap to `cap` bytes, letting the least recently used cells go where
     /// it shrinks. Only speed depends on it, never the points read.
-    pub fn set_cache_cap(&mut self, cap: u64) {
+    fn set_cache_cap(&mut self, cap: u64) {
         self.cap = cap;
         self.cache.set_capacity(cap);
+    }
+
+    /// Start a pass (a level's leaves, or the tiles) that keeps `reserve` bytes of the budget
+    /// for its own waves: the reads so far, for [`PointSource::end_pass`]'s log line, and the
+    /// cache grown for the pass ([`PointSource::grow_cache`]).
+    pub fn begin_pass(&mut self, reserve: u64, ctx: &Ctx) -> Pass {
+        Pass {
+            before: self.cell_reads(),
+            growth: self.grow_cache(reserve, ctx),
+        }
+    }
+
+    /// End `pass`: log what stage `name` read during it, then give back the cache's growth
+    /// (the cap it found, the least recently used cells let go).
+    pub fn end_pass(&mut self, pass: Pass, name: &str) {
+        self.log_reads(name, pass.before);
+        if let Some((cap, _permit)) = pass.growth {
+            self.set_cache_cap(cap);
+        }
     }
 
     /// Grow the cache for one pass out of what the budget has free beyond `reserve` (the
     /// pass's own waves), twice the cache (a wave's points copied out of it) and a store cell
     /// being read by each worker, as far as every store cell at once; a growth under a
-    /// quarter of the cap is not taken. Only speed
-    /// depends on it: a pass in Morton order meets a store cell again as the boxes of leaves
-    /// or tiles on the far side of an octant boundary reach into it, and a cache that lets it
-    /// go in between reads it again. (Growing to 32 MiB a worker was too little: on 2 cores a
-    /// 100M-point sphere's 272 store cells of 18 MB were read 9 times by the finest leaves
-    /// and 15 times by the tiles through 128 MiB, half the run's time.) [`end_growth`]
-    /// restores the cap.
-    ///
-    /// [`end_growth`]: PointSource::end_growth
-    pub fn grow_cache(&mut self, reserve: u64, ctx: &Ctx) -> Option<CacheGrowth> {
+    /// quarter of the cap is not taken. Only speed depends on it: a pass in Morton order
+    /// meets a store cell again as the boxes of leaves or tiles on the far side of an octant
+    /// boundary reach into it, and a cache that lets it go in between reads it again.
+    /// (Growing to 32 MiB a worker was too little: on 2 cores a 100M-point sphere's 272 store
+    /// cells of 18 MB were read 9 times by the finest leaves and 15 times by the tiles
+    /// through 128 MiB, half the run's time.) Returns the cap to restore and the permit
+    /// holding the growth.
+    fn grow_cache(&mut self, reserve: u64, ctx: &Ctx) -> Option<(u64, Permit)> {
         let cap = self.cap;
         let cells = self.store.manifest.cells.len();
         let whole: u64 = (0..cells).map(|i| self.cell_estimate(i)).sum();
@@ -334,18 +351,7 @@ impl<'a> PointSource<'a> {
         }
         let permit = ctx.budget.try_acquire(grow)?;
         self.set_cache_cap(cap + grow);
-        Some(CacheGrowth {
-            cap,
-            _permit: permit,
-        })
-    }
-
-    /// Give back a [`PointSource::grow_cache`] growth: the cap it found, the least recently
-    /// used cells let go.
-    pub fn end_growth(&mut self, growth: Option<CacheGrowth>) {
-        if let Some(g) = growth {
-            self.set_cache_cap(g.cap);
-        }
+        Some((cap, permit))
     }
 
     /// The same source reading its dense store cells summed per voxel of the plan's lattice
@@ -637,24 +643,24 @@ impl<'a> PointSource<'a> {
     }
 }
 
-/// A pass's growth of a [`PointSource`]'s cache ([`PointSource::grow_cache`]): the cap to
-/// restore, and the budget the growth holds until then.
-pub struct CacheGrowth {
-    cap: u64,
-    _permit: Permit,
+/// A pass over a [`PointSource`] ([`PointSource::begin_pass`]): the reads before it, and
+/// the cache's growth for it (the cap to restore, and the budget it holds until then).
+pub struct Pass {
+    before: CellReads,
+    growth: Option<(u64, Permit)>,
 }
 
 /// Counts of a [`PointSource`]'s reads of store cells, for the log.
-#[derive(Clone, Copy, Debug, Default)]
-pub struct CellReads {
+#[derive(Clone, Copy, Debug)]
+struct CellReads {
     /// Store cells read (a cell the cache let go is read again).
-    pub cells: u64,
+    cells: u64,
     /// Their points.
-    pub points: u64,
+    points: u64,
     /// Of the cells, those read one at a time by a loading read, not by a parallel preload.
-    pub serial: u64,
+    serial: u64,
     /// The seconds those took.
-    pub serial_s: f64,
+    serial_s: f64,
 }
 
 /// How a read reaches the store cells: loading what the cache lacks (and caching it), or

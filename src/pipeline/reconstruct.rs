@@ -41,7 +41,7 @@ use crate::types::{CellKey, PointBatch};
 pub(super) const BATCH_POINT_BYTES: u64 = 52;
 
 /// The most the plan gives the cache of sorted store cells, whatever the budget; a pass with
-/// room grows it for its length ([`PointSource::grow_cache`]).
+/// room grows it for its length ([`PointSource::begin_pass`]).
 const POINT_CACHE_MAX_BYTES: u64 = 128 << 20;
 
 /// The fewest points a solve accepts.
@@ -950,7 +950,6 @@ fn leaf_pass(
     ctx: &Ctx,
 ) -> Result<LeafPass> {
     let leaves: Vec<CellKey> = leaves.into_iter().collect();
-    let reads_before = src.cell_reads();
     // A solve, and the window of the levels above it reads: each level's details near it.
     let fine_bytes = plan.leaf_scratch_bytes() + coarse.levels() as u64 * window_bytes(plan);
     let stage = ctx
@@ -979,7 +978,7 @@ fn leaf_pass(
     let workers = pool.current_num_threads();
     let wave = 2 * workers;
     // Room for a whole wave of solves and its points (as much as twice the plan's cache).
-    let growth = src.grow_cache(workers as u64 * fine_bytes, ctx);
+    let reads = src.begin_pass(workers as u64 * fine_bytes, ctx);
     for &claiming in params.shard.passes() {
         let mut next = 0;
         loop {
@@ -1100,8 +1099,7 @@ fn leaf_pass(
             }
         );
     }
-    src.log_reads(stage_name, reads_before);
-    src.end_growth(growth);
+    src.end_pass(reads, stage_name);
     stage.finish(None);
     let iso = if iso_count > 0 {
         iso_sum / iso_count as f64

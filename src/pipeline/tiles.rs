@@ -158,18 +158,14 @@ pub fn run(
         detail_bytes: details.detail_bytes(),
     };
     let mut tiles_done = 0usize;
-    let reads_before = match points.as_ref() {
-        Some(src) => lock(src)?.cell_reads(),
-        None => Default::default(),
-    };
     // The cache grows into what two waves leave free: their tiles, each with the details of
     // every leaf its box and their overlaps meet (a tile spans whole leaves, plus one each
     // side).
-    let growth = match points.as_ref() {
+    let reads = match points.as_ref() {
         Some(src) => {
             let near = (plan.tile / plan.leaf_voxels + 2).pow(3);
             let wave = sizes.tiles as u64 * (sizes.tile_bytes + near * sizes.detail_bytes);
-            lock(src)?.grow_cache(2 * wave, ctx)
+            Some(lock(src)?.begin_pass(2 * wave, ctx))
         }
         None => None,
     };
@@ -224,10 +220,8 @@ pub fn run(
     if shard.is_split() {
         stage.inc(visited.iter().filter(|v| !**v).count() as u64);
     }
-    if let Some(src) = points.as_ref() {
-        let mut src = lock(src)?;
-        src.log_reads("tiles", reads_before);
-        src.end_growth(growth);
+    if let (Some(src), Some(reads)) = (points.as_ref(), reads) {
+        lock(src)?.end_pass(reads, "tiles");
     }
     stage.finish(None);
     if gpu.is_some() {
