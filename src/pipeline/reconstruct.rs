@@ -4,6 +4,7 @@
 //! Morton-order waves (`pipeline::tiles`), welded and streamed to the writer.
 
 use std::collections::BTreeSet;
+use std::ops::Range;
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
@@ -21,15 +22,18 @@ use crate::exec::Ctx;
 use crate::exec::budget::{Permit, Share};
 use crate::io::mesh_write::MeshTarget;
 use crate::recon::checkpoint::{
-    CoarseCheckpoint, LeafSummary, coarse_path, leaf_path, read_coarse, read_leaf_summary,
-    write_coarse, write_leaf,
+    CellSplat, CoarseCheckpoint, CoarsePartKind, LeafSummary, coarse_part_path, coarse_path,
+    leaf_path, read_coarse, read_density_parts, read_leaf_summary, read_splat_parts, write_coarse,
+    write_density_parts, write_leaf, write_splat_parts,
 };
-use crate::recon::density::DensityGrid;
+use crate::recon::density::{DensityBox, DensityGrid};
 use crate::recon::pou::unit_for;
 use crate::recon::{
     CoarseField, DEFAULT_ERROR, DEFAULT_MIN_POINTS, LeafDetail, LeafRule, LeafSolvers, Level,
     Moments, Plan, PlanBudget, PointWeight, fft_solve, refine_leaf,
-    screen::{self, NOISE_KEY_BYTES, NoiseStats, ScreenBuilder, Smoothing},
+    screen::{
+        self, NOISE_KEY_BYTES, NoiseStats, SCREEN_PART_ENTRY_BYTES, ScreenBuilder, Smoothing,
+    },
     solve_coarse,
 };
 use crate::store::Store;
@@ -584,63 +588,195 @@ struct CoarsePass {
     noise: NoiseStats,
 }
 
-/// A store cell read by the coarse pass: its points (normals weighed), their noise
-/// statistics and moments, and the support voxels and finest leaves they occupy (each once).
-struct CellRead {
-    batch: PointBatch,
-    noise: NoiseStats,
-    moments: Moments,
-    marks: Vec<usize>,
-    leaves: Vec<CellKey>,
-}
-
-/// The next wave of store cells from `*i` (advanced past them): at most `wave` cells, within
-/// half of what the budget has free at `per_point` bytes a point, at least one; with its bytes.
+/// The next wave of store cells from `*i` (advanced past them) up to `end`: at most `wave`
+/// cells, within half of what the budget has free at `bytes(cell)` each, at least one; with
+/// their bytes.
 fn cell_wave(
-    store: &Store,
     i: &mut usize,
+    end: usize,
     wave: usize,
-    per_point: u64,
+    bytes: &impl Fn(usize) -> u64,
     ctx: &Ctx,
 ) -> (Vec<usize>, u64) {
-    let cells = &store.manifest.cells;
     let free = ctx.budget.total().saturating_sub(ctx.budget.used());
-    let (mut ids, mut bytes) = (Vec::with_capacity(wave), 0u64);
-    while *i < cells.len() && ids.len() < wave {
-        let b = cells[*i].count * per_point;
-        if !ids.is_empty() && bytes + b > free / 2 {
+    let (mut ids, mut sum) = (Vec::with_capacity(wave), 0u64);
+    while *i < end && ids.len() < wave {
+        let b = bytes(*i);
+        if !ids.is_empty() && sum + b > free / 2 {
             break;
         }
         ids.push(*i);
-        bytes += b;
+        sum += b;
         *i += 1;
     }
-    (ids, bytes)
+    (ids, sum)
 }
 
-/// Pass 0: every point's sampling density, splatted onto a grid at the coarse spacing; the
-/// cells are read in parallel waves and added in parallel over z-slabs of the grid (the sums
-/// are integers: the same grid in any order).
-fn density_pass(store: &Store, plan: &Plan, ctx: &Ctx) -> Result<DensityGrid> {
+/// Points in a chunk of a split run's coarse pass, at least (whole store cells, in order):
+/// the work item its shards claim, a fraction of a second of reading. Store cells of
+/// ingest's default size make a chunk each.
+const COARSE_CHUNK_POINTS: u64 = 1 << 17;
+
+/// The chunks of the store's cells a split run's coarse pass claims: consecutive cells, each
+/// chunk closed once it holds [`COARSE_CHUNK_POINTS`]. A function of the store alone.
+fn coarse_chunks(store: &Store) -> Vec<Range<usize>> {
+    let mut chunks = Vec::new();
+    let (mut from, mut points) = (0, 0u64);
+    for (i, c) in store.manifest.cells.iter().enumerate() {
+        points += c.count;
+        if points >= COARSE_CHUNK_POINTS {
+            chunks.push(from..i + 1);
+            (from, points) = (i + 1, 0);
+        }
+    }
+    if from < store.manifest.cells.len() {
+        chunks.push(from..store.manifest.cells.len());
+    }
+    chunks
+}
+
+/// How one of the coarse pass's two reads of the store computes, sizes, checkpoints and
+/// sums its parts (one per store cell).
+struct CellParts<'a, P> {
+    kind: CoarsePartKind,
+    /// Bytes a store cell's read and part may hold at once, at most.
+    cell_bytes: &'a (dyn Fn(usize) -> u64 + Sync),
+    /// The part of store cell `i`.
+    part: &'a (dyn Fn(usize) -> Result<P> + Sync),
+    /// Bytes a part holds.
+    size: fn(&P) -> u64,
+    write: fn(&std::path::Path, &[P]) -> Result<()>,
+    read: fn(&std::path::Path) -> Result<Vec<P>>,
+}
+
+/// One read of the store by the coarse pass: the part of every store cell, given to `add` in
+/// cell order. One process reads the cells in waves and adds each wave's parts. A split run's
+/// shards compute chunks of cells ([`coarse_chunks`]) as claimed work items, checkpointed in
+/// the leaf directory, taking over in a second pass what other shards left undone (as the
+/// leaf pass does); then every shard reads every chunk back and adds them in order. So `add`
+/// sees the same parts in the same order wherever they were computed: the sums, and the
+/// bits, are one process's for any shard count.
+fn over_cells<P: Send>(
+    store: &Store,
+    params: &ReconParams,
+    dirs: &WorkDir,
+    how: CellParts<P>,
+    mut add: impl FnMut(Vec<P>) -> Result<()>,
+    ctx: &Ctx,
+) -> Result<()> {
+    let wave = 2 * ctx.threads();
+    let run = |cells: Range<usize>, sink: &mut dyn FnMut(Vec<P>) -> Result<()>| -> Result<()> {
+        let mut i = cells.start;
+        while i < cells.end {
+            let (ids, bytes) = cell_wave(&mut i, cells.end, wave, &how.cell_bytes, ctx);
+            // The coarse grid's permit is held: admitted without waiting (`tiles::admit_now`).
+            let _permit = tiles::admit_now(ctx, bytes);
+            let parts: Vec<P> = ctx.pool.install(|| {
+                ids.par_iter()
+                    .map(|&j| (how.part)(j))
+                    .collect::<Result<_>>()
+            })?;
+            sink(parts)?;
+        }
+        Ok(())
+    };
+    if !params.shard.is_split() {
+        return run(0..store.manifest.cells.len(), &mut add);
+    }
+    let chunks = coarse_chunks(store);
+    let claims = Claims::new(&dirs.claims);
+    let prefix = match how.kind {
+        CoarsePartKind::Density => "D",
+        CoarsePartKind::Splat => "S",
+    };
+    let path = |c: usize| coarse_part_path(&dirs.leaves, how.kind, c);
+    let mut here = 0;
+    for &claiming in params.shard.passes() {
+        for c in params.shard.order(chunks.len()) {
+            if path(c).exists() || (claiming && !claims.take(&format!("{prefix}{c}"))?) {
+                continue;
+            }
+            let (mut held, mut permits) = (Vec::new(), Vec::new());
+            run(chunks[c].clone(), &mut |parts| {
+                permits.push(tiles::admit_now(ctx, parts.iter().map(how.size).sum()));
+                held.extend(parts);
+                Ok(())
+            })?;
+            (how.write)(&path(c), &held)?;
+            here += 1;
+        }
+    }
+    log::info!(
+        "{}: {here} of {} chunks of store cells read here, the others' parts read back",
+        prefix_name(how.kind),
+        chunks.len()
+    );
+    for c in 0..chunks.len() {
+        let parts = (how.read)(&path(c))?;
+        let _permit = tiles::admit_now(ctx, parts.iter().map(how.size).sum());
+        add(parts)?;
+    }
+    Ok(())
+}
+
+/// The name of a read of the coarse pass, as its progress stage shows it.
+fn prefix_name(kind: CoarsePartKind) -> &'static str {
+    match kind {
+        CoarsePartKind::Density => "density",
+        CoarsePartKind::Splat => "splat",
+    }
+}
+
+/// Nodes per axis that the points of store cell `i` reach on a grid of `nodes` nodes over
+/// the cube, at most (its octree cell's share of the grid, and a few for the kernels).
+fn cell_nodes(store: &Store, i: usize, nodes: u64) -> u64 {
+    let level = store.manifest.cells[i].key.level();
+    ((nodes >> level.min(63)) + 4).min(nodes + 1)
+}
+
+/// Pass 0: every point's sampling density, splatted onto a grid at the coarse spacing; each
+/// store cell into a part of its own, the parts added in parallel over z-slabs of the grid
+/// (the sums are integers: the same grid in any order, [`over_cells`]).
+fn density_pass(
+    store: &Store,
+    plan: &Plan,
+    params: &ReconParams,
+    dirs: &WorkDir,
+    ctx: &Ctx,
+) -> Result<DensityGrid> {
     let m = &store.manifest;
     // Charged with the coarse solve's scratch (`Plan::needs`).
     let mut grid = DensityGrid::new(&plan.cube, plan.coarse_cells());
+    let layout = grid.layout();
     let stage = ctx.progress.stage("density", Some(m.point_count), "points");
-    let wave = 2 * ctx.threads();
-    let ncells = m.cells.len();
-    let mut i = 0;
-    while i < ncells {
-        let (ids, bytes) = cell_wave(store, &mut i, wave, BATCH_POINT_BYTES, ctx);
-        let _permit = tiles::admit_now(ctx, bytes);
-        let batches: Vec<PointBatch> = ctx.pool.install(|| {
-            ids.par_iter()
-                .map(|&j| store.read_cell(j))
-                .collect::<Result<_>>()
-        })?;
-        let pos: Vec<&[[f64; 3]]> = batches.iter().map(|b| &b.pos[..]).collect();
-        ctx.pool.install(|| grid.add_batches(&pos));
-        stage.inc(batches.iter().map(|b| b.len() as u64).sum());
-    }
+    let nodes = plan.coarse_cells() + 1;
+    let cell_bytes =
+        |i: usize| m.cells[i].count * BATCH_POINT_BYTES + 4 * cell_nodes(store, i, nodes).pow(3);
+    let part = |i: usize| {
+        let b = store.read_cell(i)?;
+        stage.inc(b.len() as u64);
+        Ok(layout.part(&b.pos))
+    };
+    let how = CellParts {
+        kind: CoarsePartKind::Density,
+        cell_bytes: &cell_bytes,
+        part: &part,
+        size: DensityBox::bytes,
+        write: write_density_parts,
+        read: read_density_parts,
+    };
+    over_cells(
+        store,
+        params,
+        dirs,
+        how,
+        |parts| {
+            let parts: Vec<&DensityBox> = parts.iter().collect();
+            ctx.pool.install(|| grid.add_parts(&parts));
+            Ok(())
+        },
+        ctx,
+    )?;
     grid.finish();
     stage.finish(None);
     Ok(grid)
@@ -649,16 +785,17 @@ fn density_pass(store: &Store, plan: &Plan, ctx: &Ctx) -> Result<DensityGrid> {
 /// Pass 1: splat every point into the coarse grid of `plan` (the top level), each normal
 /// weighed by its sample's share of the surface (pass 0); collect the occupied leaf cells of
 /// `fine` (the finest level), the noise in its voxels, the coarse voxels holding points, and
-/// the moments that refuse planar and linear inputs; solve. Every part of a wave runs in
-/// parallel: the cells' reads, and then the splat and the screening's samples over z-slabs of
-/// their grids, each node and voxel taking its samples in cell order (so the bits of one
-/// thread's pass, [`fft_solve::splat_batches`]); before, the splat was one thread's, a fifth
-/// of the pass on 2 cores and its bound on many.
+/// the moments that refuse planar and linear inputs; solve. Each store cell's share
+/// ([`CellSplat`]: its splat and screening aggregates apart from the grids, and the rest) is
+/// computed on its own, in parallel; the shares are added in cell order, the grids' in
+/// parallel over z-slabs ([`fft_solve::add_boxes`], [`ScreenBuilder::add_parts`]), so the
+/// bits are the same for any thread and shard count ([`over_cells`]).
 fn coarse_pass(
     store: &Store,
     fine: &Plan,
     plan: &Plan,
     params: &ReconParams,
+    dirs: &WorkDir,
     ctx: &Ctx,
 ) -> Result<CoarsePass> {
     let m = &store.manifest;
@@ -667,13 +804,14 @@ fn coarse_pass(
         plan.coarse_scratch_bytes() + plan.density_bytes(),
         "the coarse global solve and the sampling density",
     )?;
-    let density = Arc::new(density_pass(store, plan, ctx)?);
+    let density = Arc::new(density_pass(store, plan, params, dirs, ctx)?);
     let stage = ctx.progress.stage("splat", Some(m.point_count), "points");
     let mut v = vec![[0f32; 3]; cgrid.len()];
     let mut occupied = BTreeSet::new();
     // Relative to the cube's corner, as the tile meshes it trims (`pipeline::tiles`).
     let origin = plan.cube.origin;
-    let mut support = Support::new([0.0; 3], plan.coarse_spacing(), plan.coarse_cells());
+    let new_support = || Support::new([0.0; 3], plan.coarse_spacing(), plan.coarse_cells());
+    let (mut support, locate) = (new_support(), new_support());
     let mut moments = Moments::new(m.bounds.min);
     // The samples aggregated per coarse voxel for the screening: one entry per occupied coarse
     // voxel, admitted as it grows.
@@ -681,80 +819,82 @@ fn coarse_pass(
     let mut noise = NoiseStats::default();
     let mut screen = ScreenBuilder::with_slabs(&cgrid, ctx.threads());
     let mut screen_permit: Option<Permit> = None;
-    let wave = 2 * ctx.threads();
     let noise_every = screen::noise_cell_stride(m.point_count);
-    let ncells = m.cells.len();
-    let mut i = 0;
-    while i < ncells {
-        // At most `wave` cells, within half of what is free (the screening samples grow into
-        // the other half), at least one. Each node takes its batches in cell order whatever
-        // the waves and the slabs.
-        let per_point = BATCH_POINT_BYTES + NOISE_KEY_BYTES;
-        let (ids, bytes) = cell_wave(store, &mut i, wave, per_point, ctx);
-        // The coarse grid's permit is held: admitted without waiting (see `tiles::admit_now`).
-        let _permit = tiles::admit_now(ctx, bytes);
-        // Each cell's noise statistics, moments, occupied leaves and support beside its read
-        // (for `auto` and the vertex fit); pooled below in cell order.
-        let batches: Vec<CellRead> = ctx.pool.install(|| {
-            ids.par_iter()
-                .map(|&j| {
-                    let mut b = store.read_cell(j)?;
-                    let noise = if j % noise_every == 0 {
-                        NoiseStats::of(&b.pos, &b.normal, fine.cube.origin, fine.spacing)
-                    } else {
-                        NoiseStats::default()
-                    };
-                    weigh_normals(&mut b, plan.confidence, &density);
-                    let mut moments = Moments::new(m.bounds.min);
-                    // A cell's points are near each other: runs of one voxel or leaf are
-                    // kept once as they come, the rest once sorted.
-                    let (mut marks, mut leaves) = (Vec::new(), Vec::new());
-                    for p in &b.pos {
-                        let i = support.index([0, 1, 2].map(|a| p[a] - origin[a]));
-                        if marks.last() != Some(&i) {
-                            marks.push(i);
-                        }
-                        let k = CellKey::new(
-                            fine.leaf_level,
-                            fine.cube.cell_coords(*p, fine.leaf_level),
-                        );
-                        if leaves.last() != Some(&k) {
-                            leaves.push(k);
-                        }
-                        moments.add(*p);
-                    }
-                    marks.sort_unstable();
-                    marks.dedup();
-                    leaves.sort_unstable();
-                    leaves.dedup();
-                    Ok(CellRead {
-                        batch: b,
-                        noise,
-                        moments,
-                        marks,
-                        leaves,
-                    })
-                })
-                .collect::<Result<_>>()
-        })?;
-        for r in &batches {
-            noise.add(r.noise);
-            moments.merge(&r.moments);
-            r.marks.iter().for_each(|&i| support.mark_index(i));
-            occupied.extend(&r.leaves);
-            stage.inc(r.batch.len() as u64);
+    let nodes = cgrid.n as u64;
+    let cell_bytes = |i: usize| {
+        let box_bytes = fft_solve::SplatBox::bytes_within(cell_nodes(store, i, nodes));
+        let screen_bytes = if screened {
+            SCREEN_PART_ENTRY_BYTES * m.cells[i].count.min(box_bytes / 12)
+        } else {
+            0
+        };
+        m.cells[i].count * (BATCH_POINT_BYTES + NOISE_KEY_BYTES) + box_bytes + screen_bytes
+    };
+    // A store cell's share: its noise statistics, moments, occupied leaves and support
+    // beside its splat and screening aggregates.
+    let part = |j: usize| -> Result<CellSplat> {
+        let mut b = store.read_cell(j)?;
+        let noise = if j.is_multiple_of(noise_every) {
+            NoiseStats::of(&b.pos, &b.normal, fine.cube.origin, fine.spacing)
+        } else {
+            NoiseStats::default()
+        };
+        weigh_normals(&mut b, plan.confidence, &density);
+        let mut moments = Moments::new(m.bounds.min);
+        // A cell's points are near each other: runs of one voxel or leaf are kept once as
+        // they come, the rest once sorted.
+        let (mut marks, mut leaves) = (Vec::new(), Vec::new());
+        for p in &b.pos {
+            let i = locate.index([0, 1, 2].map(|a| p[a] - origin[a])) as u64;
+            if marks.last() != Some(&i) {
+                marks.push(i);
+            }
+            let k = CellKey::new(fine.leaf_level, fine.cube.cell_coords(*p, fine.leaf_level));
+            if leaves.last() != Some(&k) {
+                leaves.push(k);
+            }
+            moments.add(*p);
         }
-        // The splat and the screening's samples, in parallel over z-slabs of their grids:
-        // each node and voxel takes its samples in cell order, whatever the slabs.
-        let splats: Vec<fft_solve::Samples> = batches
-            .iter()
-            .map(|r| (&r.batch.pos[..], &r.batch.normal[..]))
-            .collect();
+        marks.sort_unstable();
+        marks.dedup();
+        leaves.sort_unstable();
+        leaves.dedup();
+        stage.inc(b.len() as u64);
+        Ok(CellSplat {
+            points: b.len() as u64,
+            splat: fft_solve::splat_box(&cgrid, &b.pos, &b.normal),
+            screen: if screened {
+                ScreenBuilder::part(&cgrid, &b.pos)
+            } else {
+                Vec::new()
+            },
+            noise,
+            moments: moments.sums(),
+            marks,
+            leaves,
+        })
+    };
+    let how = CellParts {
+        kind: CoarsePartKind::Splat,
+        cell_bytes: &cell_bytes,
+        part: &part,
+        size: CellSplat::bytes,
+        write: write_splat_parts,
+        read: read_splat_parts,
+    };
+    let add = |parts: Vec<CellSplat>| -> Result<()> {
+        for r in &parts {
+            noise.add(r.noise);
+            moments.merge(&Moments::with_sums(m.bounds.min, r.moments));
+            r.marks.iter().for_each(|&i| support.mark_index(i as usize));
+            occupied.extend(&r.leaves);
+        }
+        let boxes: Vec<&fft_solve::SplatBox> = parts.iter().map(|r| &r.splat).collect();
         ctx.pool
-            .install(|| fft_solve::splat_batches(&cgrid, &splats, &mut v));
+            .install(|| fft_solve::add_boxes(&cgrid, &boxes, &mut v));
         if screened {
-            let pos: Vec<&[[f64; 3]]> = batches.iter().map(|r| &r.batch.pos[..]).collect();
-            ctx.pool.install(|| screen.add_batches(&pos));
+            let aggregates: Vec<&[_]> = parts.iter().map(|r| &r.screen[..]).collect();
+            ctx.pool.install(|| screen.add_parts(&aggregates));
             let held = screen_permit.as_ref().map_or(0, |p| p.bytes());
             if screen.bytes() > held {
                 // Doubled ahead, as the map grows.
@@ -764,7 +904,9 @@ fn coarse_pass(
                 )?);
             }
         }
-    }
+        Ok(())
+    };
+    over_cells(store, params, dirs, how, add, ctx)?;
     stage.finish(None);
     moments.check_not_flat(&store.dir)?;
     let stage = ctx.progress.stage("coarse", None, "solves");
@@ -877,7 +1019,7 @@ fn coarse_or_checkpoint(
             noise: c.noise,
         });
     }
-    let c = coarse_pass(store, fine, plan, params, ctx)?;
+    let c = coarse_pass(store, fine, plan, params, dirs, ctx)?;
     let field = c
         .field
         .dense_values()

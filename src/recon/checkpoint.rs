@@ -1,5 +1,6 @@
-//! The work directory's checkpoint formats: the coarse pass's results (`SFCOARS1`), a leaf's
-//! detail (`SFLEAF03`) and a tile's mesh (`SFTILE07`, positions relative to the cube's lower
+//! The work directory's checkpoint formats: the coarse pass's results (`SFCOARS1`), a split
+//! run's chunks of the coarse pass's parts (`SFDPART1`, `SFSPART1`), a leaf's detail
+//! (`SFLEAF03`) and a tile's mesh (`SFTILE07`, positions relative to the cube's lower
 //! corner), all zstd-compressed little-endian records written atomically, so that a killed
 //! run leaves each file whole or absent and a resumed run reuses what it finds.
 
@@ -7,11 +8,13 @@ use std::borrow::Cow;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
+use super::density::DensityBox;
+use super::fft_solve::SplatBox;
 use super::leaf::LeafDetail;
-use super::screen::{JetStats, NoiseStats};
+use super::screen::{JetStats, NoiseStats, SCREEN_PART_ENTRY_BYTES, ScreenPart};
 use crate::error::{Error, IoContext, Result};
 use crate::io::atomic::{self, Durability};
-use crate::io::le::LeReader;
+use crate::io::le::{LeReader, LeWriter};
 use crate::types::{CellKey, Detail, EdgeKey, MAX_SHIFT, TileMesh};
 
 /// zstd level of checkpoints: the fastest, since they are read back once.
@@ -386,16 +389,7 @@ pub fn read_coarse(path: &Path) -> Result<Option<CoarseCheckpoint<'static>>> {
     let short = || bad("cut short");
     let iterations = r.u32().ok_or_else(short)?;
     let point_weight = r.f64().ok_or_else(short)?;
-    let mut noise = NoiseStats {
-        sum_sq: r.f64().ok_or_else(short)?,
-        dof: r.u64().ok_or_else(short)?,
-        jets: [JetStats::default(); 2],
-    };
-    for j in &mut noise.jets {
-        j.sum_sq = r.f64().ok_or_else(short)?;
-        j.dof = r.u64().ok_or_else(short)?;
-        j.fits = r.u64().ok_or_else(short)?;
-    }
+    let noise = get_noise(&mut r).ok_or_else(short)?;
     // Each array after its length; a length past the record's end stops at its end.
     fn array<'a, T>(
         r: &mut LeReader<'a>,
@@ -420,6 +414,235 @@ pub fn read_coarse(path: &Path) -> Result<Option<CoarseCheckpoint<'static>>> {
         support: Cow::Owned(support),
         occupied,
     }))
+}
+
+/// A split run's share of the coarse pass for a chunk of store cells, one of two kinds:
+/// the cells' density parts (`SFDPART1`, [`write_density_parts`]) or their splats
+/// (`SFSPART1`, [`write_splat_parts`]), each in the leaf checkpoints' directory `dir`.
+pub fn coarse_part_path(dir: &Path, kind: CoarsePartKind, chunk: usize) -> PathBuf {
+    let name = match kind {
+        CoarsePartKind::Density => "density",
+        CoarsePartKind::Splat => "splat",
+    };
+    dir.join(format!("coarse-{name}-{chunk:06}.zst"))
+}
+
+/// The two passes over the store whose parts a split run checkpoints.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CoarsePartKind {
+    /// The sampling density ([`DensityBox`]).
+    Density,
+    /// The splat, the screening's samples and what the coarse pass measures ([`CellSplat`]).
+    Splat,
+}
+
+/// A store cell's share of the coarse pass's splat: its points, its splat and screening
+/// aggregates apart from the grids, its noise statistics and moments, and the coarse
+/// voxels (support indices) and finest leaves it occupies. The pass adds the cells' shares
+/// in cell order, wherever they were computed (`pipeline::reconstruct`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct CellSplat {
+    /// Points read.
+    pub points: u64,
+    /// The splat of the weighed normals.
+    pub splat: SplatBox,
+    /// The screening's aggregates (none when the run does not screen).
+    pub screen: ScreenPart,
+    /// The noise statistics (zero for the cells not sampled).
+    pub noise: NoiseStats,
+    /// The points' moments' sums ([`crate::recon::coarse::Moments::sums`]).
+    pub moments: [f64; 10],
+    /// The coarse voxels holding points, ascending, each once.
+    pub marks: Vec<u64>,
+    /// The finest level's occupied leaf cells, ascending, each once.
+    pub leaves: Vec<CellKey>,
+}
+
+impl CellSplat {
+    /// Bytes the share holds.
+    pub fn bytes(&self) -> u64 {
+        self.splat.bytes()
+            + SCREEN_PART_ENTRY_BYTES * self.screen.len() as u64
+            + 8 * (self.marks.len() + self.leaves.len()) as u64
+            + 200
+    }
+}
+
+/// `SFDPART1`: the cell count (u64), then per cell its [`DensityBox`]: `lo` and `dims` (u64
+/// each axis) and the counts (u32); then the CRC-32 of all that; zstd-compressed.
+const DENSITY_PARTS_MAGIC: &[u8; 8] = b"SFDPART1";
+
+/// `SFSPART1`: the cell count (u64), then per cell ([`CellSplat`]): the points (u64); the
+/// splat's `lo` (i64 as u64) and `dims` (u64) per axis and its values (3 f32 a node); the
+/// screening's entry count (u64) and entries (key u64, the offsets' sums 3 f64, count u64);
+/// the noise statistics (as in `SFCOARS1`); the moments' 10 sums (f64); the marks' and the
+/// leaves' counts (u64) and values (u64); then the CRC-32; zstd-compressed.
+const SPLAT_PARTS_MAGIC: &[u8; 8] = b"SFSPART1";
+
+/// Write the density parts of a chunk's cells to `path`.
+pub fn write_density_parts(path: &Path, parts: &[DensityBox]) -> Result<()> {
+    let mut w = LeWriter::new(DENSITY_PARTS_MAGIC);
+    w.u64(parts.len() as u64);
+    for b in parts {
+        b.lo.iter().chain(&b.dims).for_each(|&v| w.u64(v as u64));
+        b.counts.iter().for_each(|&c| w.u32(c));
+    }
+    write_record(path, w)
+}
+
+/// Read back the density parts at `path` ([`write_density_parts`]).
+pub fn read_density_parts(path: &Path) -> Result<Vec<DensityBox>> {
+    let raw = read_record(path)?;
+    let bad = |what: &str| Error::input(path, format!("corrupt coarse pass part: {what}"));
+    let mut r = LeReader::open(&raw, DENSITY_PARTS_MAGIC)
+        .ok_or_else(|| bad("wrong magic or checksum (cut short, or not this format)"))?;
+    let parts = (|| {
+        let cells = r.u64()?;
+        let mut parts = Vec::new();
+        for _ in 0..cells {
+            let mut v = [0usize; 6];
+            for x in &mut v {
+                *x = usize::try_from(r.u64()?).ok()?;
+            }
+            let dims = [v[3], v[4], v[5]];
+            let nodes = dims.iter().try_fold(1usize, |a, &d| a.checked_mul(d))?;
+            let counts = (0..nodes).map(|_| r.u32()).collect::<Option<Vec<u32>>>()?;
+            parts.push(DensityBox {
+                lo: [v[0], v[1], v[2]],
+                dims,
+                counts,
+            });
+        }
+        Some(parts)
+    })()
+    .ok_or_else(|| bad("cut short"))?;
+    if !r.at_end() {
+        return Err(bad("bytes after the end"));
+    }
+    Ok(parts)
+}
+
+/// Write the splat shares of a chunk's cells to `path`.
+pub fn write_splat_parts(path: &Path, parts: &[CellSplat]) -> Result<()> {
+    let mut w = LeWriter::new(SPLAT_PARTS_MAGIC);
+    w.u64(parts.len() as u64);
+    for c in parts {
+        w.u64(c.points);
+        c.splat.lo.iter().for_each(|&v| w.u64(v as u64));
+        c.splat.dims.iter().for_each(|&v| w.u64(v as u64));
+        c.splat.values.iter().flatten().for_each(|&v| w.f32(v));
+        w.u64(c.screen.len() as u64);
+        for &(key, (sum, count)) in &c.screen {
+            w.u64(key);
+            sum.iter().for_each(|&v| w.f64(v));
+            w.u64(count);
+        }
+        put_noise(&mut w, &c.noise);
+        c.moments.iter().for_each(|&v| w.f64(v));
+        for list in [
+            &c.marks[..],
+            &c.leaves.iter().map(|k| k.0).collect::<Vec<_>>()[..],
+        ] {
+            w.u64(list.len() as u64);
+            list.iter().for_each(|&v| w.u64(v));
+        }
+    }
+    write_record(path, w)
+}
+
+/// Read back the splat shares at `path` ([`write_splat_parts`]).
+pub fn read_splat_parts(path: &Path) -> Result<Vec<CellSplat>> {
+    let raw = read_record(path)?;
+    let bad = |what: &str| Error::input(path, format!("corrupt coarse pass part: {what}"));
+    let mut r = LeReader::open(&raw, SPLAT_PARTS_MAGIC)
+        .ok_or_else(|| bad("wrong magic or checksum (cut short, or not this format)"))?;
+    let parts = (|| {
+        let cells = r.u64()?;
+        let mut parts = Vec::new();
+        for _ in 0..cells {
+            let points = r.u64()?;
+            let lo = [(); 3].map(|_| r.u64().map(|v| v as i64));
+            let lo = [lo[0]?, lo[1]?, lo[2]?];
+            let mut dims = [0usize; 3];
+            for d in &mut dims {
+                *d = usize::try_from(r.u64()?).ok()?;
+            }
+            let nodes = dims.iter().try_fold(1usize, |a, &d| a.checked_mul(d))?;
+            let values = (0..nodes)
+                .map(|_| Some([r.f32()?, r.f32()?, r.f32()?]))
+                .collect::<Option<Vec<_>>>()?;
+            let entries = r.u64()?;
+            let screen = (0..entries)
+                .map(|_| Some((r.u64()?, ([r.f64()?, r.f64()?, r.f64()?], r.u64()?))))
+                .collect::<Option<ScreenPart>>()?;
+            let noise = get_noise(&mut r)?;
+            let mut moments = [0f64; 10];
+            for m in &mut moments {
+                *m = r.f64()?;
+            }
+            let mut list = || {
+                let n = r.u64()?;
+                (0..n).map(|_| r.u64()).collect::<Option<Vec<u64>>>()
+            };
+            let marks = list()?;
+            let leaves = list()?.into_iter().map(CellKey).collect();
+            parts.push(CellSplat {
+                points,
+                splat: SplatBox { lo, dims, values },
+                screen,
+                noise,
+                moments,
+                marks,
+                leaves,
+            });
+        }
+        Some(parts)
+    })()
+    .ok_or_else(|| bad("cut short"))?;
+    if !r.at_end() {
+        return Err(bad("bytes after the end"));
+    }
+    Ok(parts)
+}
+
+/// The noise statistics as `SFCOARS1` and `SFSPART1` hold them.
+fn put_noise(w: &mut LeWriter, n: &NoiseStats) {
+    w.f64(n.sum_sq);
+    w.u64(n.dof);
+    for j in &n.jets {
+        w.f64(j.sum_sq);
+        w.u64(j.dof);
+        w.u64(j.fits);
+    }
+}
+
+/// Read back [`put_noise`]'s statistics.
+fn get_noise(r: &mut LeReader) -> Option<NoiseStats> {
+    let mut noise = NoiseStats {
+        sum_sq: r.f64()?,
+        dof: r.u64()?,
+        jets: [JetStats::default(); 2],
+    };
+    for j in &mut noise.jets {
+        j.sum_sq = r.f64()?;
+        j.dof = r.u64()?;
+        j.fits = r.u64()?;
+    }
+    Some(noise)
+}
+
+/// Compress the record `w` and write it to `path` atomically.
+fn write_record(path: &Path, w: LeWriter) -> Result<()> {
+    let z = zstd::bulk::compress(&w.finish(), ZSTD_LEVEL)
+        .map_err(|e| Error::Internal(format!("zstd compression failed: {e}")))?;
+    atomic::write(path, &z, Durability::Renamed)
+}
+
+/// The decompressed record at `path`.
+fn read_record(path: &Path) -> Result<Vec<u8>> {
+    let z = std::fs::read(path).with_path(path)?;
+    zstd::stream::decode_all(&z[..])
+        .map_err(|e| Error::input(path, format!("corrupt coarse pass part: {e}")))
 }
 
 #[cfg(test)]
@@ -472,6 +695,69 @@ mod tests {
                 "{e}"
             );
         }
+    }
+
+    #[test]
+    fn coarse_parts_round_trip_and_bad_ones_are_named() {
+        let d = tempfile::tempdir().unwrap();
+        let dens = vec![
+            DensityBox {
+                lo: [1, 2, 3],
+                dims: [2, 1, 2],
+                counts: vec![0, 256, 7, u32::MAX],
+            },
+            DensityBox::default(),
+        ];
+        let splat = vec![CellSplat {
+            points: 9,
+            splat: SplatBox {
+                lo: [-1, 0, 5],
+                dims: [1, 2, 1],
+                values: vec![[1.0, -0.5, 2.0], [f32::MIN_POSITIVE, 0.0, -3.0]],
+            },
+            screen: vec![(4, ([0.5, 0.25, 1.5], 3)), (70, ([0.0; 3], 1))],
+            noise: NoiseStats {
+                sum_sq: 2.5,
+                dof: 4,
+                jets: [JetStats {
+                    sum_sq: 0.5,
+                    dof: 6,
+                    fits: 1,
+                }; 2],
+            },
+            moments: std::array::from_fn(|i| i as f64 * 0.5 - 1.0),
+            marks: vec![3, 8, 1 << 40],
+            leaves: vec![CellKey::new(4, [1, 2, 3])],
+        }];
+        let (dp, sp) = (
+            coarse_part_path(d.path(), CoarsePartKind::Density, 3),
+            coarse_part_path(d.path(), CoarsePartKind::Splat, 3),
+        );
+        assert_ne!(dp, sp);
+        write_density_parts(&dp, &dens).unwrap();
+        write_splat_parts(&sp, &splat).unwrap();
+        assert_eq!(read_density_parts(&dp).unwrap(), dens);
+        assert_eq!(read_splat_parts(&sp).unwrap(), splat);
+        // Cut short, a flipped bit, the other kind, and none: errors naming the file.
+        let raw = zstd::stream::decode_all(&std::fs::read(&sp).unwrap()[..]).unwrap();
+        let mut flipped = raw.clone();
+        flipped[30] ^= 1;
+        let dens_raw = std::fs::read(&dp).unwrap();
+        for bad in [
+            zstd::bulk::compress(&raw[..raw.len() - 3], 1).unwrap(),
+            zstd::bulk::compress(&flipped, 1).unwrap(),
+            dens_raw,
+        ] {
+            std::fs::write(&sp, bad).unwrap();
+            let e = read_splat_parts(&sp).unwrap_err().to_string();
+            assert!(
+                e.contains("coarse-splat-000003.zst") && e.contains("corrupt coarse pass part"),
+                "{e}"
+            );
+        }
+        std::fs::remove_file(&dp).unwrap();
+        let e = read_density_parts(&dp).unwrap_err().to_string();
+        assert!(e.contains("coarse-density-000003.zst"), "{e}");
     }
 
     #[test]

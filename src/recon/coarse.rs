@@ -331,6 +331,16 @@ impl Moments {
         m[9] += q[1] * q[2];
     }
 
+    /// The sums: count, Σx, Σy, Σz, Σx², Σy², Σz², Σxy, Σxz, Σyz (for a checkpoint).
+    pub fn sums(&self) -> [f64; 10] {
+        self.m
+    }
+
+    /// The moments about `origin` whose sums are `m` ([`Moments::sums`]).
+    pub fn with_sums(origin: [f64; 3], m: [f64; 10]) -> Moments {
+        Moments { origin, m }
+    }
+
     /// Add the points `other` holds (taken relative to the same origin).
     pub fn merge(&mut self, other: &Moments) {
         for (a, b) in self.m.iter_mut().zip(&other.m) {

@@ -43,7 +43,7 @@
 
 use rayon::prelude::*;
 
-use crate::types::{Cube, round_index, z_range};
+use crate::types::{Cube, round_index};
 
 /// The largest factor by which a sample's normal is scaled up (or down): density contrasts
 /// up to this ratio are fully compensated (module docs).
@@ -59,6 +59,26 @@ const ONE: f64 = 256.0;
 /// `∫ B²` of the quadratic B-spline: the mean of `Σ_k b_k²` over a surface's offsets from the
 /// nodes ([`DensityGrid::sample_spacing`]).
 const B_SQUARED_MEAN: f64 = 11.0 / 20.0;
+
+/// One batch's splat kept apart from the grid ([`DensityGrid::part`]): the nodes
+/// `lo ..= lo + dims − 1` its kernels reach, x fastest. A split run's shards splat their
+/// store cells into parts and every shard adds them all up ([`DensityGrid::add_parts`]).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct DensityBox {
+    /// The box's lowest node.
+    pub lo: [usize; 3],
+    /// Nodes per axis.
+    pub dims: [usize; 3],
+    /// Per node, x fastest, in 1/256 steps.
+    pub counts: Vec<u32>,
+}
+
+impl DensityBox {
+    /// Bytes of the counts.
+    pub fn bytes(&self) -> u64 {
+        4 * self.counts.len() as u64
+    }
+}
 
 /// Sampling density on the nodes of a grid over the cube (module docs).
 #[derive(Debug, Clone)]
@@ -115,6 +135,7 @@ impl DensityGrid {
 
     /// The 27 nodes around `p` with their quadratic B-spline weights (clamped into the
     /// grid; they sum to 1).
+    #[cfg(test)]
     #[inline]
     fn support(&self, p: [f64; 3]) -> [(usize, f64); 27] {
         let [(a0, w0), (a1, w1), (a2, w2)] = [0, 1, 2].map(|a| self.axis(p[a], a));
@@ -128,51 +149,73 @@ impl DensityGrid {
 
     /// Splat the samples `pos`.
     pub fn add(&mut self, pos: &[[f64; 3]]) {
-        self.add_batches(&[pos]);
+        let part = self.part(pos);
+        self.add_parts(&[&part]);
     }
 
-    /// Splat the batches of samples `batches`, in parallel over z-slabs of the grid (one a
-    /// thread of the pool it runs in). The counts are integers added with saturation, never
-    /// negative: the same grid in any order and for any number of slabs.
-    pub fn add_batches(&mut self, batches: &[&[[f64; 3]]]) {
-        let slab = self.n * self.n;
-        let per = self.n.div_ceil(rayon::current_num_threads().max(1));
-        let mut counts = std::mem::take(&mut self.counts);
-        let this = &*self;
-        // Per batch, the node planes its kernels reach (the axis clamps, so this bounds them).
-        let spans: Vec<Option<(usize, usize)>> = batches
-            .par_iter()
-            .map(|pos| {
-                let (lo, hi) = z_range(pos)?;
-                Some((this.axis(lo, 2).0[0], this.axis(hi, 2).0[2]))
-            })
-            .collect();
-        counts
+    /// The grid's geometry without its counts: [`DensityGrid::part`]s computed beside the
+    /// grid they are added to.
+    pub fn layout(&self) -> DensityGrid {
+        DensityGrid {
+            counts: Vec::new(),
+            ..*self
+        }
+    }
+
+    /// The splat of the samples `pos` apart from the grid ([`DensityBox`]).
+    pub fn part(&self, pos: &[[f64; 3]]) -> DensityBox {
+        if pos.is_empty() {
+            return DensityBox::default();
+        }
+        let (mut lo, mut hi) = ([usize::MAX; 3], [0usize; 3]);
+        for p in pos {
+            for a in 0..3 {
+                let (at, _) = self.axis(p[a], a);
+                lo[a] = lo[a].min(at[0]);
+                hi[a] = hi[a].max(at[2]);
+            }
+        }
+        let dims = [0, 1, 2].map(|a| hi[a] - lo[a] + 1);
+        let mut counts = vec![0u32; dims[0] * dims[1] * dims[2]];
+        for p in pos {
+            let [(a0, w0), (a1, w1), (a2, w2)] = [0, 1, 2].map(|a| self.axis(p[a], a));
+            // As [`DensityGrid::support`] weighs them (the clamped nodes repeat).
+            for c in 0..27 {
+                let (i, j, k) = (c % 3, c / 3 % 3, c / 9);
+                let q = round_index(w0[i] * w1[j] * w2[k] * ONE) as u32;
+                let at = ((a2[k] - lo[2]) * dims[1] + a1[j] - lo[1]) * dims[0] + a0[i] - lo[0];
+                counts[at] = counts[at].saturating_add(q);
+            }
+        }
+        DensityBox { lo, dims, counts }
+    }
+
+    /// Add the parts `parts` ([`DensityGrid::part`] of this grid), in parallel over z-slabs
+    /// of the grid (one a thread of the pool it runs in). The counts are integers added with
+    /// saturation, never negative: the same grid in any order, for any number of slabs and
+    /// however the samples were split into parts.
+    pub fn add_parts(&mut self, parts: &[&DensityBox]) {
+        let n = self.n;
+        let slab = n * n;
+        let per = n.div_ceil(rayon::current_num_threads().max(1)).max(1);
+        self.counts
             .par_chunks_mut(per * slab)
             .enumerate()
             .for_each(|(s, chunk)| {
-                let (lo, hi) = (s * per, s * per + chunk.len() / slab);
-                for (pos, zs) in batches.iter().zip(&spans) {
-                    if zs.is_some_and(|(a, b)| b < lo || a >= hi) {
-                        continue;
-                    }
-                    for p in *pos {
-                        let (az, _) = this.axis(p[2], 2);
-                        if az.iter().all(|&z| z < lo || z >= hi) {
-                            continue;
-                        }
-                        for (i, w) in this.support(*p) {
-                            let z = i / slab;
-                            if z >= lo && z < hi {
-                                let q = round_index(w * ONE) as u32;
-                                let c = &mut chunk[i - lo * slab];
+                let (z0, z1) = (s * per, s * per + chunk.len() / slab);
+                for b in parts {
+                    let [dx, dy, dz] = b.dims;
+                    for bz in (0..dz).filter(|&k| (z0..z1).contains(&(b.lo[2] + k))) {
+                        for by in 0..dy {
+                            let row = ((b.lo[2] + bz - z0) * n + b.lo[1] + by) * n + b.lo[0];
+                            let from = &b.counts[(bz * dy + by) * dx..][..dx];
+                            for (c, &q) in chunk[row..row + dx].iter_mut().zip(from) {
                                 *c = c.saturating_add(q);
                             }
                         }
                     }
                 }
             });
-        self.counts = counts;
     }
 
     /// The counts (for a checkpoint).
@@ -269,7 +312,7 @@ mod tests {
     }
 
     #[test]
-    fn slabs_add_the_counts_of_one_pass_for_any_thread_count() {
+    fn parts_add_the_counts_of_one_pass_for_any_thread_count() {
         // Tilted planes in three batches, one spanning the cube's whole height.
         let mut pts = plane(0.1, 0.9, 120);
         for (i, p) in pts.iter_mut().enumerate() {
@@ -290,7 +333,9 @@ mod tests {
                 .build()
                 .unwrap();
             let mut got = DensityGrid::new(&unit(), 32);
-            pool.install(|| got.add_batches(&batches));
+            let parts: Vec<DensityBox> = batches.iter().map(|b| got.part(b)).collect();
+            let parts: Vec<&DensityBox> = parts.iter().collect();
+            pool.install(|| got.add_parts(&parts));
             assert!(got.counts == want.counts, "{threads} threads");
         }
     }

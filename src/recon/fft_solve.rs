@@ -67,6 +67,12 @@ impl LocalGrid {
         (lo >= 0 && hi < self.n as i64).then_some((lo, hi))
     }
 
+    /// The factor of a splatted normal, `1/h³` in the solve's unit (the module docs).
+    pub(crate) fn splat_scale(&self) -> f32 {
+        let h_u = self.h / self.unit;
+        (1.0 / (h_u * h_u * h_u)) as f32
+    }
+
     /// Number of nodes.
     pub fn len(&self) -> usize {
         self.n * self.n * self.n
@@ -142,7 +148,7 @@ pub fn splat(grid: &LocalGrid, pos: &[[f64; 3]], nrm: &[[f32; 3]], v: &mut [[f32
 
 /// [`splat`] onto the nodes of the z-slab `z0 .. z0 + v.len()/n²` alone (`v` holds them,
 /// z slowest): each of them takes the same additions in the same order as in one [`splat`]
-/// of the grid, so slabs splatted in parallel ([`splat_batches`]) give its bits.
+/// of the grid.
 pub fn splat_slab(
     grid: &LocalGrid,
     pos: &[[f64; 3]],
@@ -151,8 +157,7 @@ pub fn splat_slab(
     v: &mut [[f32; 3]],
 ) {
     let inv_h = 1.0 / grid.h;
-    let h_u = grid.h / grid.unit;
-    let scale = (1.0 / (h_u * h_u * h_u)) as f32;
+    let scale = grid.splat_scale();
     for (p, nn) in pos.iter().zip(nrm) {
         let u = [0, 1, 2].map(|a| (p[a] - grid.origin[a]) * inv_h);
         splat_node(grid.n, u, *nn, scale, z0, v);
@@ -162,26 +167,110 @@ pub fn splat_slab(
 /// A batch of samples: positions (world frame) and normals.
 pub type Samples<'a> = (&'a [[f64; 3]], &'a [[f32; 3]]);
 
-/// [`splat`] the batches `(pos, nrm)` in order onto `v`, in parallel over z-slabs of the
-/// grid (one a thread of the pool it runs in): the bits of one [`splat`] of the batches in
-/// order, for any number of slabs ([`splat_slab`]).
-pub fn splat_batches(grid: &LocalGrid, batches: &[Samples<'_>], v: &mut [[f32; 3]]) {
-    let slab = grid.n * grid.n;
-    let per = grid.n.div_ceil(rayon::current_num_threads().max(1));
-    let planes: Vec<Option<(i64, i64)>> = batches
-        .par_iter()
-        .map(|(pos, _)| grid.z_planes(pos))
-        .collect();
+/// One batch's [`splat`] kept apart from any grid's values: the nodes `lo ..= lo + dims − 1`
+/// its samples reach (unwrapped indices, wrapped into the grid when added), x fastest, each
+/// holding the sum of its additions in the samples' order.
+///
+/// The coarse pass splats each store cell into its own box and adds the boxes to the grid in
+/// the cells' order ([`add_boxes`]): a node's value is then a sum over cells, in cell order,
+/// of each cell's sum, whichever thread or shard splatted the cell. So a split run's shards
+/// splat their share of the cells, keep the boxes, and every shard adds them all up into the
+/// bits one process gets.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct SplatBox {
+    /// The box's lowest node (unwrapped).
+    pub lo: [i64; 3],
+    /// Nodes per axis.
+    pub dims: [usize; 3],
+    /// Per node, x fastest.
+    pub values: Vec<[f32; 3]>,
+}
+
+impl SplatBox {
+    /// Bytes of the values.
+    pub fn bytes(&self) -> u64 {
+        12 * self.values.len() as u64
+    }
+
+    /// Bytes of a box whose samples span `nodes` nodes per axis at most: their nodes and
+    /// one more above, for the trilinear weights.
+    pub fn bytes_within(nodes: u64) -> u64 {
+        12 * (nodes + 1).pow(3)
+    }
+}
+
+/// The splat of `pos`/`nrm` on `grid` into a box of its own ([`SplatBox`]): what [`splat`]
+/// adds to each node, in the same order, summed from zero.
+pub fn splat_box(grid: &LocalGrid, pos: &[[f64; 3]], nrm: &[[f32; 3]]) -> SplatBox {
+    let inv_h = 1.0 / grid.h;
+    let scale = grid.splat_scale();
+    let node = |p: &[f64; 3]| [0, 1, 2].map(|a| (p[a] - grid.origin[a]) * inv_h);
+    let (mut lo, mut hi) = ([i64::MAX; 3], [i64::MIN; 3]);
+    for p in pos {
+        let u = node(p);
+        for a in 0..3 {
+            let f = floor(u[a]) as i64;
+            lo[a] = lo[a].min(f);
+            hi[a] = hi[a].max(f + 1);
+        }
+    }
+    if pos.is_empty() {
+        return SplatBox::default();
+    }
+    let dims = [0, 1, 2].map(|a| (hi[a] - lo[a] + 1) as usize);
+    let mut values = vec![[0f32; 3]; dims[0] * dims[1] * dims[2]];
+    for (p, nn) in pos.iter().zip(nrm) {
+        let u = node(p);
+        let (mut at, mut w) = ([0usize; 3], [[0f32; 2]; 3]);
+        for a in 0..3 {
+            let fl = floor(u[a]);
+            at[a] = (fl as i64 - lo[a]) as usize;
+            let f = (u[a] - fl) as f32;
+            w[a] = [1.0 - f, f];
+        }
+        // As `splat_node` weighs them.
+        for c in 0..8usize {
+            let (dx, dy, dz) = (c & 1, (c >> 1) & 1, (c >> 2) & 1);
+            let wc = w[0][dx] * w[1][dy] * w[2][dz] * scale;
+            let cell = &mut values[((at[2] + dz) * dims[1] + at[1] + dy) * dims[0] + at[0] + dx];
+            cell[0] += wc * nn[0];
+            cell[1] += wc * nn[1];
+            cell[2] += wc * nn[2];
+        }
+    }
+    SplatBox { lo, dims, values }
+}
+
+/// Add the boxes `boxes` ([`splat_box`]) in order onto `v` (the grid's nodes, x fastest), in
+/// parallel over z-slabs of the grid (one a thread of the pool it runs in): every node takes
+/// the boxes' values in the boxes' order, so the bits do not depend on the slabs.
+pub fn add_boxes(grid: &LocalGrid, boxes: &[&SplatBox], v: &mut [[f32; 3]]) {
+    let n = grid.n;
+    let slab = n * n;
+    let per = n.div_ceil(rayon::current_num_threads().max(1)).max(1);
+    let w = |i: i64, k: usize| wrap(i + k as i64, n as i64) as usize;
     v.par_chunks_mut(per * slab)
         .enumerate()
         .for_each(|(s, chunk)| {
-            let (z0, z1) = ((s * per) as i64, (s * per + chunk.len() / slab) as i64);
-            for ((pos, nrm), zs) in batches.iter().zip(&planes) {
-                // A batch whose nodes all lie beyond the slab adds nothing to it.
-                if zs.is_some_and(|(lo, hi)| hi < z0 || lo >= z1) {
-                    continue;
+            let (z0, z1) = (s * per, s * per + chunk.len() / slab);
+            for b in boxes {
+                let [dx, dy, dz] = b.dims;
+                for bz in 0..dz {
+                    let z = w(b.lo[2], bz);
+                    if z < z0 || z >= z1 {
+                        continue;
+                    }
+                    for by in 0..dy {
+                        let row = ((z - z0) * n + w(b.lo[1], by)) * n;
+                        let from = &b.values[(bz * dy + by) * dx..][..dx];
+                        for (bx, val) in from.iter().enumerate() {
+                            let c = &mut chunk[row + w(b.lo[0], bx)];
+                            c[0] += val[0];
+                            c[1] += val[1];
+                            c[2] += val[2];
+                        }
+                    }
                 }
-                splat_slab(grid, pos, nrm, z0 as usize, chunk);
             }
         });
 }
@@ -685,7 +774,7 @@ impl Solver {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::recon::screen::ScreenBuilder;
+    use crate::recon::screen::{Aggregate, ScreenBuilder, ScreenPart};
 
     /// In-place 3D FFT of an `n³` cube (x fastest) with the 1D plan `fft` along each axis.
     fn fft3(data: &mut [Complex32], n: usize, fft: &Arc<dyn Fft<f32>>) {
@@ -935,9 +1024,9 @@ mod tests {
     }
 
     #[test]
-    fn slabs_splat_and_screen_the_bits_of_one_pass_for_any_thread_count() {
+    fn boxes_splat_and_screen_the_same_bits_for_any_thread_count() {
         // A sphere of radius 0.5 in batches of uneven sizes, the third reaching past the
-        // grid (its weights wrap, so no slab may skip it).
+        // grid (its weights wrap).
         let (mut pos, nrm) = relief_sphere(60, 0.1, 7.0);
         pos[5][2] = 1.01;
         let g = sphere_grid();
@@ -946,13 +1035,41 @@ mod tests {
             .windows(2)
             .map(|w| (&pos[w[0]..w[1]], &nrm[w[0]..w[1]]))
             .collect();
+        // One batch's box on a zero grid is its splat.
+        let (p, n) = batches[2];
+        let mut want = vec![[0f32; 3]; g.len()];
+        splat(&g, p, n, &mut want);
+        let mut got = vec![[0f32; 3]; g.len()];
+        add_boxes(&g, &[&splat_box(&g, p, n)], &mut got);
+        assert!(got == want, "a box is not its batch's splat");
+        let boxes: Vec<SplatBox> = batches.iter().map(|(p, n)| splat_box(&g, p, n)).collect();
+        let boxes: Vec<&SplatBox> = boxes.iter().collect();
+        let parts: Vec<ScreenPart> = batches
+            .iter()
+            .map(|(p, _)| ScreenBuilder::part(&g, p))
+            .collect();
+        let parts: Vec<&[(u64, Aggregate)]> = parts.iter().map(|p| &p[..]).collect();
+        // In sequence, one box and one part after the other.
         let mut want = vec![[0f32; 3]; g.len()];
         let mut one = ScreenBuilder::new(&g);
-        for (p, n) in &batches {
-            splat(&g, p, n, &mut want);
-            one.add(p);
+        for (b, s) in boxes.iter().zip(&parts) {
+            add_boxes(&g, &[b], &mut want);
+            one.add_parts(&[s]);
         }
         let want_screen = one.finish(2.0);
+        // Every sample splatted, to the rounding of the sums' grouping.
+        let mut direct = vec![[0f32; 3]; g.len()];
+        splat(&g, &pos, &nrm, &mut direct);
+        let err = want
+            .iter()
+            .zip(&direct)
+            .flat_map(|(a, b)| (0..3).map(move |k| (a[k] - b[k]).abs()))
+            .fold(0f32, f32::max);
+        let top = direct.iter().flatten().fold(0f32, |m, v| m.max(v.abs()));
+        assert!(
+            err <= 1e-5 * top,
+            "boxes stray {err} from the splat (of {top})"
+        );
         for threads in [1, 2, 3, 7] {
             let pool = rayon::ThreadPoolBuilder::new()
                 .num_threads(threads)
@@ -960,10 +1077,9 @@ mod tests {
                 .unwrap();
             let mut got = vec![[0f32; 3]; g.len()];
             let mut sb = ScreenBuilder::with_slabs(&g, threads);
-            let pos_only: Vec<&[[f64; 3]]> = batches.iter().map(|b| b.0).collect();
             pool.install(|| {
-                splat_batches(&g, &batches, &mut got);
-                sb.add_batches(&pos_only);
+                add_boxes(&g, &boxes, &mut got);
+                sb.add_parts(&parts);
             });
             assert!(got == want, "{threads} threads: another splat");
             let s = sb.finish(2.0);

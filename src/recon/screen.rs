@@ -620,14 +620,24 @@ fn voxel_mean(
 }
 
 /// A voxel's aggregate: the sum of its samples' offsets in it (in voxels) and their count.
-type Aggregate = ([f64; 3], u64);
+pub type Aggregate = ([f64; 3], u64);
+
+/// One batch's aggregates kept apart from any builder ([`ScreenBuilder::part`]): per voxel
+/// (`(z·n + y)·n + x`, ascending) the sum over the batch's samples in their order. The coarse
+/// pass aggregates each store cell into its own part and adds the parts in cell order
+/// ([`ScreenBuilder::add_parts`]), so that cells aggregated by other threads or shards give
+/// the same operator (as [`super::fft_solve::SplatBox`] does for the splat).
+pub type ScreenPart = Vec<(u64, Aggregate)>;
+
+/// Bytes of one entry of a [`ScreenPart`].
+pub const SCREEN_PART_ENTRY_BYTES: u64 = 40;
 
 /// Samples gathered per voxel of a grid, before [`ScreenBuilder::finish`] weighs them.
 pub struct ScreenBuilder {
     grid: LocalGrid,
     /// Per z-slab of the grid's voxels (`per` planes each, the last maybe fewer), per wrapped
     /// voxel (`(z·n + y)·n + x`): its [`Aggregate`]. Slabs take their samples in parallel
-    /// ([`ScreenBuilder::add_batches`]).
+    /// ([`ScreenBuilder::add_parts`]).
     slabs: Vec<KeyMap<u64, Aggregate>>,
     per: usize,
     /// Instead of the maps, for a leaf's grid ([`ScreenBuilder::dense`]): the aggregates in
@@ -710,7 +720,7 @@ impl ScreenBuilder {
     }
 
     /// No samples yet, on `grid`, its voxels split into `slabs` z-slabs that
-    /// [`ScreenBuilder::add_batches`] fills in parallel (the same operator for any count).
+    /// [`ScreenBuilder::add_parts`] fills in parallel (the same operator for any count).
     pub fn with_slabs(grid: &LocalGrid, slabs: usize) -> ScreenBuilder {
         let per = grid.n.div_ceil(slabs.clamp(1, grid.n.max(1)));
         ScreenBuilder {
@@ -755,24 +765,36 @@ impl ScreenBuilder {
         }
     }
 
-    /// Add the batches of samples `batches` in order, the slabs in parallel (on the pool it
-    /// runs in): each voxel takes the same samples in the same order as from [`ScreenBuilder::add`].
-    pub fn add_batches(&mut self, batches: &[&[[f64; 3]]]) {
-        if self.dense.is_some() {
-            batches.iter().for_each(|pos| self.add(pos));
+    /// The aggregates of the samples at `pos` (world frame) on `grid`, apart from any
+    /// builder ([`ScreenPart`]).
+    pub fn part(grid: &LocalGrid, pos: &[[f64; 3]]) -> ScreenPart {
+        let mut map = KeyMap::default();
+        add_samples(grid, &mut map, pos, ALL_PLANES);
+        let mut part: ScreenPart = map.into_iter().collect();
+        part.sort_unstable_by_key(|e| e.0);
+        part
+    }
+
+    /// Add the parts `parts` ([`ScreenBuilder::part`], on this builder's grid) in order, the
+    /// slabs in parallel (on the pool it runs in): each voxel takes the parts' aggregates in
+    /// the parts' order, whatever the slabs.
+    pub fn add_parts(&mut self, parts: &[&[(u64, Aggregate)]]) {
+        if let Some((list, slot)) = &mut self.dense {
+            for &(key, (sum, count)) in parts.iter().copied().flatten() {
+                aggregate(dense_entry(list, slot, key), sum, count);
+            }
             return;
         }
-        let (g, per) = (self.grid, self.per);
-        let spans: Vec<Option<(i64, i64)>> =
-            batches.par_iter().map(|pos| g.z_planes(pos)).collect();
+        let (plane, per) = ((self.grid.n * self.grid.n) as u64, self.per);
         self.slabs.par_iter_mut().enumerate().for_each(|(s, map)| {
-            let planes = Self::planes(per, s);
-            for (pos, zs) in batches.iter().zip(&spans) {
-                // A batch whose voxels all lie beyond the slab adds nothing to it.
-                if zs.is_some_and(|(lo, hi)| hi < planes.0 as i64 || lo >= planes.1 as i64) {
-                    continue;
+            let (z0, z1) = Self::planes(per, s);
+            for part in parts {
+                // Keys ascend, and a slab's keys are a range of them.
+                let from = part.partition_point(|e| e.0 < z0 * plane);
+                let to = part.partition_point(|e| e.0 < z1.saturating_mul(plane));
+                for &(key, (sum, count)) in &part[from..to] {
+                    aggregate(map.entry(key).or_insert(([0.0; 3], 0)), sum, count);
                 }
-                add_samples(&g, map, pos, planes);
             }
         });
     }
@@ -1000,7 +1022,10 @@ mod tests {
         let build = |mut b: ScreenBuilder| {
             b.add(&pos[..200]);
             b.add_voxels(on, &sums);
-            b.add_batches(&[&pos[200..250], &pos[250..]]);
+            b.add_parts(&[
+                &ScreenBuilder::part(&g, &pos[200..250]),
+                &ScreenBuilder::part(&g, &pos[250..]),
+            ]);
             b.finish(2.0)
         };
         let (maps, dense) = (

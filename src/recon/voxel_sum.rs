@@ -144,8 +144,7 @@ pub fn sum_voxels(
 /// corner is one node; on a coarser one, [`restrict`] the fine splat instead where it is at
 /// hand (the same sums, a tenth of the work).
 pub fn splat_voxels(grid: &LocalGrid, on: OnLattice, voxels: &[VoxelSum], v: &mut [[f32; 3]]) {
-    let h_u = grid.h / grid.unit;
-    let scale = (1.0 / (h_u * h_u * h_u)) as f32;
+    let scale = grid.splat_scale();
     let n = grid.n as i64;
     for s in voxels {
         for (c, nn) in s.corner.iter().enumerate() {

@@ -214,6 +214,73 @@ fn a_killed_shard_is_replaced_and_rerun_without_repeating_or_missing_work() {
     }
 }
 
+/// The number of chunks a shard's `kind` read of the coarse pass did itself, of how many,
+/// from its log.
+fn chunks_read_here(log: &str, kind: &str) -> (u32, u32) {
+    let line = log
+        .lines()
+        .find(|l| l.contains(&format!("{kind}: ")) && l.contains("chunks of store cells"))
+        .unwrap_or_else(|| panic!("no {kind} chunks in:\n{log}"));
+    let after = line.split(&format!("{kind}: ")).nth(1).unwrap();
+    let w: Vec<&str> = after.split_whitespace().collect();
+    (w[0].parse().unwrap(), w[2].parse().unwrap())
+}
+
+#[test]
+fn shards_share_the_coarse_pass_and_a_damaged_part_is_named() {
+    // Store cells of 20k points: the coarse pass's chunks are work items like leaves.
+    let d = tempfile::tempdir().unwrap();
+    let ply = d.path().join("torus.ply");
+    let p = ply.to_str().unwrap();
+    ok(&[
+        "synth", "torus", "--points", "400000", "--noise", "0.001", "-o", p,
+    ]);
+    let store = d.path().join("store");
+    super::common::ingest_in_cells(&ply, &store, 20_000);
+    let single = d.path().join("single.ply");
+    let opts = ["--depth", "7"];
+    ok(&recon(&store, &single, &opts));
+    let (out, work) = (d.path().join("m.ply"), d.path().join("w"));
+    let shard = |i: u32| {
+        let mut a = recon(&store, &out, &opts);
+        let s = format!("{i}/2");
+        a.extend(["--threads", "1", "--shard", &s, "--work-dir"]);
+        a.push(work.to_str().unwrap());
+        a.iter().map(|x| x.to_string()).collect::<Vec<String>>()
+    };
+    let run = |args: &[String], good: bool| {
+        let a: Vec<&str> = args.iter().map(|x| x.as_str()).collect();
+        if good {
+            super::common::ok_log(&a)
+        } else {
+            fails(&a)
+        }
+    };
+    // Shard 0 alone reads every chunk: its own slice, then the rest that nobody did.
+    let log = run(&shard(0), true);
+    let (here, all) = chunks_read_here(&log, "splat");
+    assert!(all >= 3 && here == all, "{log}");
+    assert_eq!(chunks_read_here(&log, "density"), (all, all));
+    // Shard 1 after it (its coarse pass's results taken away) reads none: every chunk's
+    // parts are there to read back.
+    let leaves = work.join("leaves");
+    std::fs::remove_file(leaves.join("coarse.zst")).unwrap();
+    let splat1 = leaves.join("coarse-splat-000001.zst");
+    let good = std::fs::read(&splat1).unwrap();
+    std::fs::write(&splat1, &good[..good.len() / 2]).unwrap();
+    let e = run(&shard(1), false);
+    assert!(
+        e.contains("coarse-splat-000001.zst") && e.contains("corrupt coarse pass part"),
+        "{e}"
+    );
+    std::fs::remove_file(&splat1).unwrap();
+    let log = run(&shard(1), true);
+    assert_eq!(chunks_read_here(&log, "splat"), (1, all), "{log}");
+    assert_eq!(chunks_read_here(&log, "density").0, 0, "{log}");
+    ok(&merge(&work, &out));
+    assert!(std::fs::read(&out).unwrap() == std::fs::read(&single).unwrap());
+}
+
 #[test]
 fn shards_refuse_mixed_runs_bad_numbers_and_point_files_and_merge_waits_for_them() {
     let d = tempfile::tempdir().unwrap();
