@@ -238,6 +238,21 @@ fn complete(out: &Path, inputs: &[InputSpec], params: &IngestParams) -> Result<b
         ));
     }
     let mut differ = Vec::new();
+    let sp = params.store_params();
+    if let Some(level) = m.zstd_level.filter(|&l| l != sp.zstd_level) {
+        differ.push(format!(
+            "--zstd-level {level} there, {} here",
+            sp.zstd_level
+        ));
+    }
+    if let Some(skip) = m.skip_invalid.filter(|&s| s != sp.skip_invalid) {
+        let said = |on: bool| if on { "given" } else { "not given" };
+        differ.push(format!(
+            "--skip-invalid {} there, {} here",
+            said(skip),
+            said(sp.skip_invalid)
+        ));
+    }
     if m.max_cell_points != params.max_cell_points {
         differ.push(format!(
             "--max-cell-points {} there, {} here",

@@ -53,6 +53,14 @@ pub struct Manifest {
     /// How the normals were estimated, when ingest estimated them.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub estimated_normals: Option<EstimatedNormals>,
+    /// The cells' zstd level (`--zstd-level`; absent from stores made before it was
+    /// recorded).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub zstd_level: Option<i32>,
+    /// Whether invalid points were skipped (`--skip-invalid`; absent from stores made
+    /// before it was recorded).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub skip_invalid: Option<bool>,
 }
 
 /// How ingest estimated the normals (absent when they came from the inputs).

@@ -433,6 +433,7 @@ impl Prepared {
             chunk_points: self.sizes.chunk_points,
             max_cell_points: self.params.max_cell_points,
             zstd_level: self.params.zstd_level,
+            skip_invalid: self.params.skip_invalid,
             levels: self.levels,
             inputs: self.inputs,
             cells,
@@ -580,6 +581,7 @@ pub struct Staged {
     chunk_points: u64,
     max_cell_points: u64,
     zstd_level: i32,
+    skip_invalid: bool,
     t0: Instant,
 }
 
@@ -692,6 +694,8 @@ impl Staged {
             inputs: self.inputs.entries(),
             cells: self.cells,
             estimated_normals: normals.as_ref().map(|n| n.0.clone()),
+            zstd_level: Some(self.zstd_level),
+            skip_invalid: Some(self.skip_invalid),
         };
         manifest.save(self.tmp.path())?;
         self.tmp.commit(&self.out)?;

@@ -238,6 +238,25 @@ fn split_ingests_refuse_mixed_options_and_other_stores() {
         e.contains("--max-cell-points 5000 there, 7000 here") && e.contains(o),
         "{e}"
     );
+    // The options a store's manifest records beside them: the cells' zstd level and
+    // --skip-invalid.
+    for (extra, want) in [
+        (&["--zstd-level", "3"][..], "--zstd-level -1 there, 3 here"),
+        (
+            &["--skip-invalid"][..],
+            "--skip-invalid not given there, given here",
+        ),
+    ] {
+        let mut opts = vec!["--max-cell-points", "5000"];
+        opts.extend(extra);
+        let e = fails(
+            &task("1/2", &opts)
+                .iter()
+                .map(String::as_str)
+                .collect::<Vec<_>>(),
+        );
+        assert!(e.contains(want) && e.contains(o), "{e}");
+    }
     assert!(Store::open(&out).is_ok());
     // A store from other inputs under the name: refused, kept.
     let other = vec![synth(d.path(), "torus", 20_000, 6)];
