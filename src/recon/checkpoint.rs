@@ -492,28 +492,36 @@ pub fn write_density_parts(path: &Path, parts: &[DensityBox]) -> Result<()> {
 
 /// Read back the density parts at `path` ([`write_density_parts`]).
 pub fn read_density_parts(path: &Path) -> Result<Vec<DensityBox>> {
-    let raw = read_record(path)?;
+    read_parts(path, DENSITY_PARTS_MAGIC, |r| {
+        let mut v = [0usize; 6];
+        for x in &mut v {
+            *x = usize::try_from(r.u64()?).ok()?;
+        }
+        let dims = [v[3], v[4], v[5]];
+        let nodes = dims.iter().try_fold(1usize, |a, &d| a.checked_mul(d))?;
+        let counts = (0..nodes).map(|_| r.u32()).collect::<Option<Vec<u32>>>()?;
+        Some(DensityBox {
+            lo: [v[0], v[1], v[2]],
+            dims,
+            counts,
+        })
+    })
+}
+
+/// The parts of the record at `path` (`magic`, a count, then each part as `one` reads it).
+fn read_parts<P>(
+    path: &Path,
+    magic: &[u8],
+    mut one: impl FnMut(&mut LeReader) -> Option<P>,
+) -> Result<Vec<P>> {
+    let z = std::fs::read(path).with_path(path)?;
     let bad = |what: &str| Error::input(path, format!("corrupt coarse pass part: {what}"));
-    let mut r = LeReader::open(&raw, DENSITY_PARTS_MAGIC)
+    let raw = zstd::stream::decode_all(&z[..]).map_err(|e| bad(&e.to_string()))?;
+    let mut r = LeReader::open(&raw, magic)
         .ok_or_else(|| bad("wrong magic or checksum (cut short, or not this format)"))?;
     let parts = (|| {
         let cells = r.u64()?;
-        let mut parts = Vec::new();
-        for _ in 0..cells {
-            let mut v = [0usize; 6];
-            for x in &mut v {
-                *x = usize::try_from(r.u64()?).ok()?;
-            }
-            let dims = [v[3], v[4], v[5]];
-            let nodes = dims.iter().try_fold(1usize, |a, &d| a.checked_mul(d))?;
-            let counts = (0..nodes).map(|_| r.u32()).collect::<Option<Vec<u32>>>()?;
-            parts.push(DensityBox {
-                lo: [v[0], v[1], v[2]],
-                dims,
-                counts,
-            });
-        }
-        Some(parts)
+        (0..cells).map(|_| one(&mut r)).collect::<Option<Vec<P>>>()
     })()
     .ok_or_else(|| bad("cut short"))?;
     if !r.at_end() {
@@ -552,57 +560,43 @@ pub fn write_splat_parts(path: &Path, parts: &[CellSplat]) -> Result<()> {
 
 /// Read back the splat shares at `path` ([`write_splat_parts`]).
 pub fn read_splat_parts(path: &Path) -> Result<Vec<CellSplat>> {
-    let raw = read_record(path)?;
-    let bad = |what: &str| Error::input(path, format!("corrupt coarse pass part: {what}"));
-    let mut r = LeReader::open(&raw, SPLAT_PARTS_MAGIC)
-        .ok_or_else(|| bad("wrong magic or checksum (cut short, or not this format)"))?;
-    let parts = (|| {
-        let cells = r.u64()?;
-        let mut parts = Vec::new();
-        for _ in 0..cells {
-            let points = r.u64()?;
-            let lo = [(); 3].map(|_| r.u64().map(|v| v as i64));
-            let lo = [lo[0]?, lo[1]?, lo[2]?];
-            let mut dims = [0usize; 3];
-            for d in &mut dims {
-                *d = usize::try_from(r.u64()?).ok()?;
-            }
-            let nodes = dims.iter().try_fold(1usize, |a, &d| a.checked_mul(d))?;
-            let values = (0..nodes)
-                .map(|_| Some([r.f32()?, r.f32()?, r.f32()?]))
-                .collect::<Option<Vec<_>>>()?;
-            let entries = r.u64()?;
-            let screen = (0..entries)
-                .map(|_| Some((r.u64()?, ([r.f64()?, r.f64()?, r.f64()?], r.u64()?))))
-                .collect::<Option<ScreenPart>>()?;
-            let noise = get_noise(&mut r)?;
-            let mut moments = [0f64; 10];
-            for m in &mut moments {
-                *m = r.f64()?;
-            }
-            let mut list = || {
-                let n = r.u64()?;
-                (0..n).map(|_| r.u64()).collect::<Option<Vec<u64>>>()
-            };
-            let marks = list()?;
-            let leaves = list()?.into_iter().map(CellKey).collect();
-            parts.push(CellSplat {
-                points,
-                splat: SplatBox { lo, dims, values },
-                screen,
-                noise,
-                moments,
-                marks,
-                leaves,
-            });
+    read_parts(path, SPLAT_PARTS_MAGIC, |r| {
+        let points = r.u64()?;
+        let lo = [(); 3].map(|_| r.u64().map(|v| v as i64));
+        let lo = [lo[0]?, lo[1]?, lo[2]?];
+        let mut dims = [0usize; 3];
+        for d in &mut dims {
+            *d = usize::try_from(r.u64()?).ok()?;
         }
-        Some(parts)
-    })()
-    .ok_or_else(|| bad("cut short"))?;
-    if !r.at_end() {
-        return Err(bad("bytes after the end"));
-    }
-    Ok(parts)
+        let nodes = dims.iter().try_fold(1usize, |a, &d| a.checked_mul(d))?;
+        let values = (0..nodes)
+            .map(|_| Some([r.f32()?, r.f32()?, r.f32()?]))
+            .collect::<Option<Vec<_>>>()?;
+        let entries = r.u64()?;
+        let screen = (0..entries)
+            .map(|_| Some((r.u64()?, ([r.f64()?, r.f64()?, r.f64()?], r.u64()?))))
+            .collect::<Option<ScreenPart>>()?;
+        let noise = get_noise(r)?;
+        let mut moments = [0f64; 10];
+        for m in &mut moments {
+            *m = r.f64()?;
+        }
+        let mut list = || {
+            let n = r.u64()?;
+            (0..n).map(|_| r.u64()).collect::<Option<Vec<u64>>>()
+        };
+        let marks = list()?;
+        let leaves = list()?.into_iter().map(CellKey).collect();
+        Some(CellSplat {
+            points,
+            splat: SplatBox { lo, dims, values },
+            screen,
+            noise,
+            moments,
+            marks,
+            leaves,
+        })
+    })
 }
 
 /// The noise statistics as `SFCOARS1` and `SFSPART1` hold them.
@@ -636,13 +630,6 @@ fn write_record(path: &Path, w: LeWriter) -> Result<()> {
     let z = zstd::bulk::compress(&w.finish(), ZSTD_LEVEL)
         .map_err(|e| Error::Internal(format!("zstd compression failed: {e}")))?;
     atomic::write(path, &z, Durability::Renamed)
-}
-
-/// The decompressed record at `path`.
-fn read_record(path: &Path) -> Result<Vec<u8>> {
-    let z = std::fs::read(path).with_path(path)?;
-    zstd::stream::decode_all(&z[..])
-        .map_err(|e| Error::input(path, format!("corrupt coarse pass part: {e}")))
 }
 
 #[cfg(test)]
