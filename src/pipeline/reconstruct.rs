@@ -685,15 +685,13 @@ fn over_cells<P: Send>(
     }
     let chunks = coarse_chunks(store);
     let claims = Claims::new(&dirs.claims);
-    let prefix = match how.kind {
-        CoarsePartKind::Density => "D",
-        CoarsePartKind::Splat => "S",
-    };
     let path = |c: usize| coarse_part_path(&dirs.leaves, how.kind, c);
     let mut here = 0;
     for &claiming in params.shard.passes() {
         for c in params.shard.order(chunks.len()) {
-            if path(c).exists() || (claiming && !claims.take(&format!("{prefix}{c}"))?) {
+            if path(c).exists()
+                || (claiming && !claims.take(&format!("{}-{c}", how.kind.name()))?)
+            {
                 continue;
             }
             let (mut held, mut permits) = (Vec::new(), Vec::new());
@@ -708,7 +706,7 @@ fn over_cells<P: Send>(
     }
     log::info!(
         "{}: {here} of {} chunks of store cells read here, the others' parts read back",
-        prefix_name(how.kind),
+        how.kind.name(),
         chunks.len()
     );
     for c in 0..chunks.len() {
@@ -717,14 +715,6 @@ fn over_cells<P: Send>(
         add(parts)?;
     }
     Ok(())
-}
-
-/// The name of a read of the coarse pass, as its progress stage shows it.
-fn prefix_name(kind: CoarsePartKind) -> &'static str {
-    match kind {
-        CoarsePartKind::Density => "density",
-        CoarsePartKind::Splat => "splat",
-    }
 }
 
 /// Nodes per axis that the points of store cell `i` reach on a grid of `nodes` nodes over
@@ -810,8 +800,8 @@ fn coarse_pass(
     let mut occupied = BTreeSet::new();
     // Relative to the cube's corner, as the tile meshes it trims (`pipeline::tiles`).
     let origin = plan.cube.origin;
-    let new_support = || Support::new([0.0; 3], plan.coarse_spacing(), plan.coarse_cells());
-    let (mut support, locate) = (new_support(), new_support());
+    let mut support = Support::new([0.0; 3], plan.coarse_spacing(), plan.coarse_cells());
+    let locate = support.layout();
     let mut moments = Moments::new(m.bounds.min);
     // The samples aggregated per coarse voxel for the screening: one entry per occupied coarse
     // voxel, admitted as it grows.
@@ -861,7 +851,6 @@ fn coarse_pass(
         leaves.dedup();
         stage.inc(b.len() as u64);
         Ok(CellSplat {
-            points: b.len() as u64,
             splat: fft_solve::splat_box(&cgrid, &b.pos, &b.normal),
             screen: if screened {
                 ScreenBuilder::part(&cgrid, &b.pos)

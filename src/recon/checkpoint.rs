@@ -420,11 +420,7 @@ pub fn read_coarse(path: &Path) -> Result<Option<CoarseCheckpoint<'static>>> {
 /// the cells' density parts (`SFDPART1`, [`write_density_parts`]) or their splats
 /// (`SFSPART1`, [`write_splat_parts`]), each in the leaf checkpoints' directory `dir`.
 pub fn coarse_part_path(dir: &Path, kind: CoarsePartKind, chunk: usize) -> PathBuf {
-    let name = match kind {
-        CoarsePartKind::Density => "density",
-        CoarsePartKind::Splat => "splat",
-    };
-    dir.join(format!("coarse-{name}-{chunk:06}.zst"))
+    dir.join(format!("coarse-{}-{chunk:06}.zst", kind.name()))
 }
 
 /// The two passes over the store whose parts a split run checkpoints.
@@ -436,14 +432,22 @@ pub enum CoarsePartKind {
     Splat,
 }
 
+impl CoarsePartKind {
+    /// The pass's name, as its progress stage shows it.
+    pub fn name(self) -> &'static str {
+        match self {
+            CoarsePartKind::Density => "density",
+            CoarsePartKind::Splat => "splat",
+        }
+    }
+}
+
 /// A store cell's share of the coarse pass's splat: its points, its splat and screening
 /// aggregates apart from the grids, its noise statistics and moments, and the coarse
 /// voxels (support indices) and finest leaves it occupies. The pass adds the cells' shares
 /// in cell order, wherever they were computed (`pipeline::reconstruct`).
 #[derive(Debug, Clone, PartialEq)]
 pub struct CellSplat {
-    /// Points read.
-    pub points: u64,
     /// The splat of the weighed normals.
     pub splat: SplatBox,
     /// The screening's aggregates (none when the run does not screen).
@@ -472,11 +476,11 @@ impl CellSplat {
 /// each axis) and the counts (u32); then the CRC-32 of all that; zstd-compressed.
 const DENSITY_PARTS_MAGIC: &[u8; 8] = b"SFDPART1";
 
-/// `SFSPART1`: the cell count (u64), then per cell ([`CellSplat`]): the points (u64); the
-/// splat's `lo` (i64 as u64) and `dims` (u64) per axis and its values (3 f32 a node); the
-/// screening's entry count (u64) and entries (key u64, the offsets' sums 3 f64, count u64);
-/// the noise statistics (as in `SFCOARS1`); the moments' 10 sums (f64); the marks' and the
-/// leaves' counts (u64) and values (u64); then the CRC-32; zstd-compressed.
+/// `SFSPART1`: the cell count (u64), then per cell ([`CellSplat`]): the splat's `lo` (i64 as
+/// u64) and `dims` (u64) per axis and its values (3 f32 a node); the screening's entry count
+/// (u64) and entries (key u64, the offsets' sums 3 f64, count u64); the noise statistics (as
+/// in `SFCOARS1`); the moments' 10 sums (f64); the marks' and the leaves' counts (u64) and
+/// values (u64); then the CRC-32; zstd-compressed.
 const SPLAT_PARTS_MAGIC: &[u8; 8] = b"SFSPART1";
 
 /// Write the density parts of a chunk's cells to `path`.
@@ -535,7 +539,6 @@ pub fn write_splat_parts(path: &Path, parts: &[CellSplat]) -> Result<()> {
     let mut w = LeWriter::new(SPLAT_PARTS_MAGIC);
     w.u64(parts.len() as u64);
     for c in parts {
-        w.u64(c.points);
         c.splat.lo.iter().for_each(|&v| w.u64(v as u64));
         c.splat.dims.iter().for_each(|&v| w.u64(v as u64));
         c.splat.values.iter().flatten().for_each(|&v| w.f32(v));
@@ -561,7 +564,6 @@ pub fn write_splat_parts(path: &Path, parts: &[CellSplat]) -> Result<()> {
 /// Read back the splat shares at `path` ([`write_splat_parts`]).
 pub fn read_splat_parts(path: &Path) -> Result<Vec<CellSplat>> {
     read_parts(path, SPLAT_PARTS_MAGIC, |r| {
-        let points = r.u64()?;
         let lo = [(); 3].map(|_| r.u64().map(|v| v as i64));
         let lo = [lo[0]?, lo[1]?, lo[2]?];
         let mut dims = [0usize; 3];
@@ -588,7 +590,6 @@ pub fn read_splat_parts(path: &Path) -> Result<Vec<CellSplat>> {
         let marks = list()?;
         let leaves = list()?.into_iter().map(CellKey).collect();
         Some(CellSplat {
-            points,
             splat: SplatBox { lo, dims, values },
             screen,
             noise,
@@ -696,7 +697,6 @@ mod tests {
             DensityBox::default(),
         ];
         let splat = vec![CellSplat {
-            points: 9,
             splat: SplatBox {
                 lo: [-1, 0, 5],
                 dims: [1, 2, 1],

@@ -41,7 +41,7 @@ use rustfft::num_complex::Complex32;
 use rustfft::{Fft, FftPlanner};
 
 use super::screen::Screen;
-use crate::types::{floor, wrap, z_range};
+use crate::types::{floor, wrap};
 
 /// A periodic grid of `n` nodes per axis.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -57,16 +57,6 @@ pub struct LocalGrid {
 }
 
 impl LocalGrid {
-    /// Node planes `lo ..= hi` (along z) holding every one that the trilinear weights of
-    /// samples at `pos` reach (a plane to spare each side, for rounding), where they lie
-    /// within the grid without wrapping; `None` otherwise (or for no samples).
-    pub fn z_planes(&self, pos: &[[f64; 3]]) -> Option<(i64, i64)> {
-        let (lo, hi) = z_range(pos)?;
-        let node = |z: f64| floor((z - self.origin[2]) / self.h) as i64;
-        let (lo, hi) = (node(lo) - 1, node(hi) + 2);
-        (lo >= 0 && hi < self.n as i64).then_some((lo, hi))
-    }
-
     /// The factor of a splatted normal, `1/h³` in the solve's unit (the module docs).
     pub(crate) fn splat_scale(&self) -> f32 {
         let h_u = self.h / self.unit;
@@ -143,29 +133,29 @@ pub fn solve(grid: &LocalGrid, pos: &[[f64; 3]], nrm: &[[f32; 3]], sigma_vox: f6
 
 /// Add the normals of `pos`/`nrm` to `v` (one `[f32; 3]` per node) as a density.
 pub fn splat(grid: &LocalGrid, pos: &[[f64; 3]], nrm: &[[f32; 3]], v: &mut [[f32; 3]]) {
-    splat_slab(grid, pos, nrm, 0, v);
-}
-
-/// [`splat`] onto the nodes of the z-slab `z0 .. z0 + v.len()/n²` alone (`v` holds them,
-/// z slowest): each of them takes the same additions in the same order as in one [`splat`]
-/// of the grid.
-pub fn splat_slab(
-    grid: &LocalGrid,
-    pos: &[[f64; 3]],
-    nrm: &[[f32; 3]],
-    z0: usize,
-    v: &mut [[f32; 3]],
-) {
     let inv_h = 1.0 / grid.h;
     let scale = grid.splat_scale();
     for (p, nn) in pos.iter().zip(nrm) {
         let u = [0, 1, 2].map(|a| (p[a] - grid.origin[a]) * inv_h);
-        splat_node(grid.n, u, *nn, scale, z0, v);
+        splat_node(grid.n, u, *nn, scale, v);
     }
 }
 
-/// A batch of samples: positions (world frame) and normals.
-pub type Samples<'a> = (&'a [[f64; 3]], &'a [[f32; 3]]);
+/// The lowest of the 8 nodes around `u` (in nodes, unwrapped) and the trilinear weights of
+/// the 8, times `scale`, corner `c` at `(c & 1, c >> 1 & 1, c >> 2 & 1)` from it: what
+/// [`splat_node`] and [`splat_box`] add, the same bits.
+#[inline]
+fn corners(u: [f64; 3], scale: f32) -> ([i64; 3], [f32; 8]) {
+    let (mut at, mut w) = ([0i64; 3], [[0f32; 2]; 3]);
+    for a in 0..3 {
+        let fl = floor(u[a]);
+        at[a] = fl as i64;
+        let f = (u[a] - fl) as f32;
+        w[a] = [1.0 - f, f];
+    }
+    let wc = std::array::from_fn(|c| w[0][c & 1] * w[1][(c >> 1) & 1] * w[2][(c >> 2) & 1] * scale);
+    (at, wc)
+}
 
 /// One batch's [`splat`] kept apart from any grid's values: the nodes `lo ..= lo + dims − 1`
 /// its samples reach (unwrapped indices, wrapped into the grid when added), x fastest, each
@@ -220,18 +210,10 @@ pub fn splat_box(grid: &LocalGrid, pos: &[[f64; 3]], nrm: &[[f32; 3]]) -> SplatB
     let dims = [0, 1, 2].map(|a| (hi[a] - lo[a] + 1) as usize);
     let mut values = vec![[0f32; 3]; dims[0] * dims[1] * dims[2]];
     for (p, nn) in pos.iter().zip(nrm) {
-        let u = node(p);
-        let (mut at, mut w) = ([0usize; 3], [[0f32; 2]; 3]);
-        for a in 0..3 {
-            let fl = floor(u[a]);
-            at[a] = (fl as i64 - lo[a]) as usize;
-            let f = (u[a] - fl) as f32;
-            w[a] = [1.0 - f, f];
-        }
-        // As `splat_node` weighs them.
-        for c in 0..8usize {
+        let (at, wc) = corners(node(p), scale);
+        let at = [0, 1, 2].map(|a| (at[a] - lo[a]) as usize);
+        for (c, wc) in wc.into_iter().enumerate() {
             let (dx, dy, dz) = (c & 1, (c >> 1) & 1, (c >> 2) & 1);
-            let wc = w[0][dx] * w[1][dy] * w[2][dz] * scale;
             let cell = &mut values[((at[2] + dz) * dims[1] + at[1] + dy) * dims[0] + at[0] + dx];
             cell[0] += wc * nn[0];
             cell[1] += wc * nn[1];
@@ -276,39 +258,14 @@ pub fn add_boxes(grid: &LocalGrid, boxes: &[&SplatBox], v: &mut [[f32; 3]]) {
 }
 
 /// Add `nn · scale` to the nodes around `u` (in nodes from node 0, wrapped into `n³`) by
-/// trilinear weights, those of the z-slab that `v` holds from `z0` on: one sample of
-/// [`splat_slab`].
-pub(crate) fn splat_node(
-    n: usize,
-    u: [f64; 3],
-    nn: [f32; 3],
-    scale: f32,
-    z0: usize,
-    v: &mut [[f32; 3]],
-) {
+/// trilinear weights: one sample of [`splat`].
+pub(crate) fn splat_node(n: usize, u: [f64; 3], nn: [f32; 3], scale: f32, v: &mut [[f32; 3]]) {
     let ni = n as i64;
-    let z1 = z0 + v.len() / (n * n);
-    // Per axis: the two node indices (wrapped) and their weights.
-    let mut at = [[0usize; 2]; 3];
-    let mut w = [[0f32; 2]; 3];
-    for a in (0..3).rev() {
-        let fl = floor(u[a]);
-        let i0 = fl as i64;
-        let f = (u[a] - fl) as f32;
-        at[a] = [wrap(i0, ni) as usize, wrap(i0 + 1, ni) as usize];
-        w[a] = [1.0 - f, f];
-        if a == 2 && at[2].iter().all(|&z| z < z0 || z >= z1) {
-            return;
-        }
-    }
-    for c in 0..8usize {
+    let (at, wc) = corners(u, scale);
+    let at = [0, 1, 2].map(|a| [wrap(at[a], ni) as usize, wrap(at[a] + 1, ni) as usize]);
+    for (c, wc) in wc.into_iter().enumerate() {
         let (dx, dy, dz) = (c & 1, (c >> 1) & 1, (c >> 2) & 1);
-        let z = at[2][dz];
-        if z < z0 || z >= z1 {
-            continue;
-        }
-        let wc = w[0][dx] * w[1][dy] * w[2][dz] * scale;
-        let cell = &mut v[((z - z0) * n + at[1][dy]) * n + at[0][dx]];
+        let cell = &mut v[(at[2][dz] * n + at[1][dy]) * n + at[0][dx]];
         cell[0] += wc * nn[0];
         cell[1] += wc * nn[1];
         cell[2] += wc * nn[2];
@@ -775,6 +732,9 @@ impl Solver {
 mod tests {
     use super::*;
     use crate::recon::screen::{Aggregate, ScreenBuilder, ScreenPart};
+
+    /// A batch of samples: positions (world frame) and normals.
+    type Samples<'a> = (&'a [[f64; 3]], &'a [[f32; 3]]);
 
     /// In-place 3D FFT of an `n³` cube (x fastest) with the 1D plan `fft` along each axis.
     fn fft3(data: &mut [Complex32], n: usize, fft: &Arc<dyn Fft<f32>>) {

@@ -158,7 +158,7 @@ pub fn splat_voxels(grid: &LocalGrid, on: OnLattice, voxels: &[VoxelSum], v: &mu
             } else {
                 let (at, f) = on.locate(g);
                 let u = [0, 1, 2].map(|a| at[a] as f64 + f[a]);
-                super::fft_solve::splat_node(grid.n, u, *nn, scale, 0, v);
+                super::fft_solve::splat_node(grid.n, u, *nn, scale, v);
             }
         }
     }

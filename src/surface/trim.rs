@@ -33,6 +33,14 @@ impl Support {
             .map(|a| (((p[a] - self.origin[a]) * self.inv_h).floor() as i64).clamp(0, self.n - 1))
     }
 
+    /// The grid without its marks: [`Support::index`] beside the support being marked.
+    pub fn layout(&self) -> Support {
+        Support {
+            bits: Vec::new(),
+            ..*self
+        }
+    }
+
     /// The index of input point `p`'s voxel, for [`Support::mark_index`].
     pub fn index(&self, p: [f64; 3]) -> usize {
         let c = self.cell(p);

@@ -270,15 +270,6 @@ pub fn wrap(i: i64, n: i64) -> i64 {
     }
 }
 
-/// The least and greatest z of `pos` (`None` for no points).
-pub fn z_range(pos: &[[f64; 3]]) -> Option<(f64, f64)> {
-    let first = pos.first()?[2];
-    Some(
-        pos.iter()
-            .fold((first, first), |(lo, hi), p| (lo.min(p[2]), hi.max(p[2]))),
-    )
-}
-
 /// `x.round()` as an index, for `0 <= x < 2^53`, without a libm call (see [`floor`]).
 #[inline(always)]
 pub fn round_index(x: f64) -> usize {

@@ -19,7 +19,7 @@ pub mod points;
 pub mod spline;
 
 pub use field::{Axis, Blend, Detail, FIELD_LIMIT, Leaf, MAX_SHIFT, VALUE_LIMIT, WEIGHT_BITS};
-pub use geom::{Aabb, Cube, Rigid, floor, round_index, wrap, z_range};
+pub use geom::{Aabb, Cube, Rigid, floor, round_index, wrap};
 pub use keys::{CellKey, EdgeKey, KeyHasher, KeyMap, MAX_LEVEL, demorton3, morton3};
 pub use mesh::{FLOAT32_SPACING, GridGeom, TileMesh};
 pub use points::{Attributes, PointBatch, Viewpoint};
