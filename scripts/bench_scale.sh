@@ -109,5 +109,9 @@ fi
 if [ -n "${BIG:-}" ]; then
   sphere 100000000
   recon 100000000 11 4G
+  # The issue's target on the 2-core VM this was planned on: 100M points at depth 11 in 4
+  # minutes (measured there: 195 s from the store).
+  t=$(cut -d' ' -f1 "$DIR/recon_100000000_d11_4G.time")
+  echo "    target 240 s on 2 cores: $(python3 -c "print('met' if $t <= 240 else 'missed')") ($t s on $(nproc) cores)"
   recon 100000000 12 4G
 fi

@@ -15,6 +15,7 @@ use crate::exec::budget::Permit;
 use crate::exec::cache::Lru;
 use crate::recon::density::DensityGrid;
 use crate::recon::leaf::LEAF_POINT_BYTES;
+use crate::recon::plan::LEAF_REACH;
 use crate::recon::voxel_sum::{SUM_MIN_POINTS_PER_VOXEL, VOXEL_SUM_BYTES, VoxelSum, sum_voxels};
 use crate::recon::{LeafPoints, Plan};
 use crate::store::Store;
@@ -32,10 +33,6 @@ const SORTED_INTENSITY_BYTES: u64 = 4;
 const SORTED_RANGE_BYTES: u64 = 24;
 /// Times [`PointSource::near_points_wave`] doubles its margin while it finds no point.
 const NEAR_POINTS_WIDENINGS: usize = 6;
-/// A leaf solves the points of its cell scaled by 1.8125 about its centre: 13/32 of the edge
-/// beyond each face. A binary fraction, so that the box's faces lie on the cube's lattice
-/// (`types::Cube`): the same points translated are then in or out of it alike.
-const LEAF_REACH: f64 = 13.0 / 32.0;
 
 /// A store cell's points sorted by leaf cell; or, for a level above the finest where the
 /// cell is dense, its points summed per voxel of the level's lattice ([`VoxelSum`]), sorted by
@@ -585,7 +582,7 @@ impl<'a> PointSource<'a> {
         Ok(out)
     }
 
-    /// For each leaf `key` of a wave, the points of its 1.8125× box, and how many of them (the
+    /// For each leaf `key` of a wave, the points of its 1.3125× box ([`LEAF_REACH`]), and how many of them (the
     /// first ones) lie in the cell itself; read by the workers of `pool`
     /// ([`PointSource::read_wave`]).
     pub fn gather_wave(

@@ -11,9 +11,10 @@
 //! takes every leaf waiting (up to a batch that fits the device's buffers) and runs, with one
 //! dispatch per step for the whole batch:
 //!
-//! 1. the Poisson solve: the divergence transformed along x, y and z (complex radix-2 FFTs,
-//!    `max(1, 512/n)` lines per workgroup in workgroup memory, the twiddles tabulated in f64
-//!    on the host),
+//! 1. the Poisson solve: the divergence transformed along x, y and z (complex FFTs of lines
+//!    of a power of two or three times one, as a leaf's `1.5E` nodes are: radix-2 stages,
+//!    then one radix-3 stage; `max(1, 512/n)` lines per workgroup in workgroup memory, the
+//!    twiddles tabulated in f64 on the host),
 //!    multiplied by the solver's filter table `−G_σ(k)/|k|²`, transformed back;
 //! 2. the screening's start: the solution gathered at the aggregates, per leaf `Σγ`, the
 //!    constant `c` and the shift `μ`, the residual `Sᵀ(−γ(Sx − c))`, the preconditioned
@@ -39,11 +40,13 @@
 //! depth 10, 5.6 s against 10.3 s; depth 11, 16.5 s against 27.1 s (batches of 5.4 leaves;
 //! the device thread busy 11.2 s, of which 6.7 s submissions and flag reads, 1.9 s uploads,
 //! 2.6 s read-backs; the workers wait 34% of their time). [`GpuSolveStats`] splits the
-//! device thread's time so the log shows which part bounds a run.
+//! device thread's time so the log shows which part bounds a run. All of these were measured
+//! with leaves of 64³ nodes; the leaves' grids are now 48³ (2.2–2.8× less CPU time a leaf,
+//! `recon::plan`), where the device's share has not been measured yet.
 //!
 //! # What differs from the CPU solve
 //!
-//! The device's arithmetic is float32 throughout: the transforms are full complex radix-2
+//! The device's arithmetic is float32 throughout: the transforms are full complex mixed-radix
 //! FFTs (not rustfft's real-to-complex plans), and the sums (`rᵀz`, `pᵀLp`, `Σγs`) are
 //! float32 tree sums of fixed chunks, then of the chunks in order, where the host sums
 //! float64 in slabs. So the solution differs from the CPU's by rounding (2.5–3.4·10⁻⁷ of
@@ -109,11 +112,28 @@ const ITERATIONS_PER_SUBMISSION: u32 = 2;
 const SLOT_PLP: u32 = 5;
 const SLOT_RZNEW: u32 = 13;
 
+/// The radix of the device FFT's last stage for lines of `n` nodes: 1 where `n` is a power of
+/// two from 4 to [`MAX_N`], 3 where it is three times a power of two from 2 (6 to `MAX_N`; a
+/// leaf's grid of `1.5E` nodes); `None` for any other `n`.
+fn fft_radix(n: usize) -> Option<u32> {
+    if !(4..=MAX_N).contains(&n) {
+        return None;
+    }
+    if n.is_power_of_two() {
+        Some(1)
+    } else if n.is_multiple_of(3) && (n / 3).is_power_of_two() && n >= 6 {
+        Some(3)
+    } else {
+        None
+    }
+}
+
 /// The uniform block of one dispatch (`solve.wgsl`: `Params`).
 #[repr(C)]
 #[derive(Clone, Copy, Default, bytemuck::Pod, bytemuck::Zeroable)]
 struct Params {
     n: u32,
+    /// log2 of `n`'s power-of-two factor `m` (`n = radix·m`).
     log2n: u32,
     nn: u32,
     batch: u32,
@@ -142,7 +162,9 @@ struct Params {
     tol2: f32,
     shift: f32,
     max_iter: f32,
-    pad: [u32; 3],
+    /// 1, or 3 where `n = 3m` (a radix-3 stage after the radix-2 ones).
+    radix: u32,
+    pad: [u32; 2],
 }
 
 /// One leaf, ready for the device: its divergence and its screening operator with the
@@ -267,9 +289,9 @@ impl GpuSolver {
             return Ok(None);
         }
         let n = solver.n();
-        if !n.is_power_of_two() || !(4..=MAX_N).contains(&n) {
+        if fft_radix(n).is_none() {
             log::info!(
-                "leaf solves on the CPU: their grids of {n}³ nodes are not a power of two from 4 to {MAX_N}"
+                "leaf solves on the CPU: their grids of {n}³ nodes are not a power of two from 4 to {MAX_N} nor three times one"
             );
             return Ok(None);
         }
@@ -613,10 +635,10 @@ impl Device {
             ssum: pipe("ssum"),
             scalars: pipe("scalars"),
         };
-        // Constants: twiddles exp(−2πik/n) for k < n/2 (pairs), |k|² by folded index, the
-        // Poisson filter.
-        let mut c = Vec::with_capacity(n + h1 + filter.len());
-        for k in 0..n / 2 {
+        // Constants: twiddles exp(−2πik/n) for k < n (pairs: the radix-3 stage reads up to
+        // 2(n/3 − 1)), |k|² by folded index, the Poisson filter.
+        let mut c = Vec::with_capacity(2 * n + h1 + filter.len());
+        for k in 0..n {
             let a = -2.0 * std::f64::consts::PI * k as f64 / n as f64;
             c.push(a.cos() as f32);
             c.push(a.sin() as f32);
@@ -776,6 +798,7 @@ impl Device {
         let base = Params {
             n: n as u32,
             log2n: n.trailing_zeros(),
+            radix: fft_radix(n).expect("a grid the device takes (GpuSolver::new)"),
             nn: nn as u32,
             batch: b as u32,
             stride,
@@ -785,8 +808,8 @@ impl Device {
             t_start: t_start as u32,
             t_ent: t_ent as u32,
             tw: 0,
-            k2: n as u32,
-            filt: (n + self.h1) as u32,
+            k2: 2 * n as u32,
+            filt: (2 * n + self.h1) as u32,
             h1: self.h1 as u32,
             tol2: (SCREEN_TOLERANCE * SCREEN_TOLERANCE) as f32,
             shift: PRECONDITIONER_SHIFT as f32,
@@ -794,9 +817,10 @@ impl Device {
             ..Params::default()
         };
         let node_groups = self.groups(nn as u64);
-        // fft.wgsl: max(1, 512/n) lines a workgroup, n² lines a leaf.
+        // fft.wgsl: max(1, 512/n) lines a workgroup (the last one's partly idle where that
+        // does not divide n²), n² lines a leaf.
         let line_groups = {
-            let g = (n * n / (512 / n).max(1)) as u64;
+            let g = (n * n).div_ceil((512 / n).max(1)) as u64;
             let gx = g.min(self.max_dim as u64);
             (gx as u32, g.div_ceil(gx) as u32)
         };

@@ -11,7 +11,7 @@ use crate::extract::gpu::GpuMode;
 use crate::recon::pou::quantise_detail;
 use crate::types::{CellKey, Detail};
 
-/// The points a leaf solves: those of its cell first, then those of the rest of its 1.8125× box.
+/// The points a leaf solves: those of its cell first, then those of the rest of its 1.3125× box.
 /// A leaf of a level above the finest reads dense store cells summed per voxel of its
 /// lattice instead ([`VoxelSum`]), in the same order: the cell's first.
 #[derive(Debug, Default)]
@@ -180,7 +180,7 @@ pub fn solve_leaf(
     // Per axis, detail node s sits on fine node q = E/2 − ov + s, between coarse nodes
     // ⌊q/r⌋ and ⌊q/r⌋ + 1 (clamped) with weights 1 − t and t, t = (q mod r)/r.
     let r = plan.coarse_ratio as i64;
-    let q0 = (plan.leaf_voxels / 2) as i64 - plan.overlap_voxels as i64;
+    let q0 = plan.leaf_pad() as i64 - plan.overlap_voxels as i64;
     let axis: Vec<([usize; 2], [f32; 2])> = (0..m as i64)
         .map(|s| {
             let q = q0 + s;
@@ -280,7 +280,7 @@ mod tests {
     fn a_leaf_solves_the_same_from_its_points_and_from_their_voxel_sums() {
         // A sphere of radius 0.3 in the unit cube at depth 7 (r = 4, leaves of 32 voxels),
         // 400K points: about 25 a voxel. The leaf holding (0.8, 0.5, 0.5) reads the points
-        // of its 1.8125× box one by one, then summed per voxel.
+        // of its 1.3125× box one by one, then summed per voxel.
         let cube = Cube {
             origin: [0.0; 3],
             size: 1.0,
@@ -291,7 +291,7 @@ mod tests {
             cube.cell_coords([0.8, 0.5, 0.5], plan.leaf_level),
         );
         let cell = cube.cell_box(key);
-        let reach = cell.grown(13.0 / 32.0 * (cell.max[0] - cell.min[0]));
+        let reach = cell.grown(crate::recon::plan::LEAF_REACH * (cell.max[0] - cell.min[0]));
         let n = 400_000;
         let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
         // (beyond the cell, voxel z y x, position, normal)

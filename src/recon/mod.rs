@@ -25,10 +25,12 @@
 //!    coarse voxels at the supported depths, [`Plan::coarse_pad`]). Coarse node `J`
 //!    coincides with fine node `rJ`; it is upsampled trilinearly ([`coarse`]).
 //! 2. Each **leaf** (an occupied octree cell of `E = 8r` fine voxels, so the coarse voxel is
-//!    `E/8`) solves its points — those of the cell scaled by 1.8125 about its centre — on a
-//!    periodic fine grid of `(2E)³` nodes (the cell embedded in a cube twice its size), and
-//!    on the coarse grid of the same domain, aligned to the global coarse grid ([`leaf`]).
-//!    Its **detail** is the difference, kept on the cell plus an overlap of `E/4` voxels.
+//!    `E/8`) solves its points — those of the cell scaled by 1.3125 about its centre — on a
+//!    periodic fine grid of `(1.5E)³` nodes (the cell padded by `E/4` beyond each face; the
+//!    prototype padded by `E/2`, as Kazhdan and Hoppe's leaves are, and measured the same
+//!    accuracy at half the padding, [`plan`]), and on the coarse grid of the same domain,
+//!    aligned to the global coarse grid ([`leaf`]). Its **detail** is the difference, kept
+//!    on the cell plus an overlap of `E/8` voxels.
 //!    The coarse local solve takes the width the coarse field was solved with (in coarse
 //!    voxels), the fine one its level's own.
 //!    Details are spilled to the work directory (zstd, [`checkpoint`]) and are the
@@ -55,7 +57,7 @@
 //! block of its nodes, blended exactly in the run's fixed point from its coarse field and
 //! the checkpoints of its leaves near the block ([`coarse::Level`]); those values are the
 //! coarse nodes of the block below (step 3's trilinear upsampling is unchanged). Every grid
-//! is then at most 264³ (the dense solve) or 64³ (a leaf solve), and leaf cost stays flat per
+//! is then at most 264³ (the dense solve) or 48³ (a leaf solve), and leaf cost stays flat per
 //! unit of surface. The leaves of a level above the finest read their store cells summed per
 //! voxel of their lattice where the cells hold at least 5 points a voxel ([`voxel_sum`]:
 //! the splat and the screening are sums of functions multilinear in a voxel, so 8 summed

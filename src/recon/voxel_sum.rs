@@ -25,8 +25,8 @@
 //!
 //! So a voxel summed is 8 normals, a count, an offset sum and a mean: 176 bytes against 36 a
 //! point. A level two octaves above the finest has 16 times the finest's points per voxel,
-//! and every point is read by each leaf whose box (1.8125 times its cell) holds it, about 3
-//! to 5 leaves: there the leaves read and splat one sum where they read, splatted and
+//! and every point is read by each leaf whose box (1.3125 times its cell) holds it, 1 to 3
+//! leaves: there the leaves read and splat one sum where they read, splatted and
 //! aggregated tens of points on two grids. Measured on 2 cores: a 100M-point sphere at depth
 //! 11 reads 10.7M sums at depth 9 where it read 3.3 times its points, and that level's leaves
 //! take 16 s instead of 68; at 10M points (6 a voxel) the level costs what it did. The finest

@@ -1,5 +1,5 @@
 // The screened leaf solve on the device, for a batch of leaves of one grid size (n³ nodes,
-// n a power of two): the FFT Poisson solve and the preconditioned conjugate gradients of
+// n a power of two or three times one): the FFT Poisson solve and the preconditioned conjugate gradients of
 // `fft_solve.rs`, every leaf's work independent of the others in the batch (see
 // `gpu_solve.rs` for the order of the dispatches and what differs from the CPU).
 //
@@ -14,6 +14,7 @@
 
 struct Params {
     n: u32,
+    // log2 of the power-of-two factor m of n = radix·m.
     log2n: u32,
     nn: u32,
     batch: u32,
@@ -44,7 +45,8 @@ struct Params {
     tol2: f32,
     shift: f32,
     max_iter: f32,
-    pad0: u32,
+    // 1, or 3 where n = 3m.
+    radix: u32,
     pad1: u32,
     pad2: u32,
 }
@@ -90,10 +92,14 @@ var<workgroup> go: u32;
 
 // L = max(1, 512 / n) lines of n values along `P.axis` per workgroup (every thread one
 // butterfly a stage for n ≤ 512): lines g·L .. g·L + L − 1 of leaf wg.z, g from wg.x and
-// wg.y, line l running over (l mod n, l div n) of the two other axes, x before y. Each line
-// is a radix-2 decimation-in-time FFT in workgroup memory (bit-reversed load, log2 n stages
-// with the twiddles exp(∓2πik/n) tabulated on the host in f64). Loads and stores of lines
-// along y and z go line-fastest, so neighbouring threads touch neighbouring x.
+// wg.y, line l running over (l mod n, l div n) of the two other axes, x before y. The last
+// workgroup's lines beyond the n² of a leaf are transformed in workgroup memory only. Each
+// line, n = R·m with m = 2^P.log2n and R = P.radix (1 or 3), is R radix-2
+// decimation-in-time FFTs of length m in workgroup memory, of the nodes i ≡ r (mod R) each
+// (bit-reversed loads, log2 m stages), then for R = 3 one radix-3 stage that combines them:
+// X[k + qm] = Σ_r ω^{rk} F_r[k] ω₃^{rq}. The twiddles exp(∓2πik/n), k < n, are tabulated on
+// the host in f64. Loads and stores of lines along y and z go line-fastest, so neighbouring
+// threads touch neighbouring x.
 @compute @workgroup_size(256)
 fn fft(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) t: u32) {
     let b = wg.z;
@@ -110,12 +116,17 @@ fn fft(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) t:
     if first >= n * n {
         return;
     }
+    let radix = P.radix;
+    let m = n / radix;
     let shift = 32u - P.log2n;
     let total = lines * n;
     for (var e = t; e < total; e += WG) {
         let ji = line_element(e, lines);
         let j = ji.x;
         let i = ji.y;
+        if first + j >= n * n {
+            continue;
+        }
         let at = line_at(b, first + j, i);
         var v: vec2<f32>;
         if (P.ends & 1u) != 0u {
@@ -123,20 +134,25 @@ fn fft(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) t:
         } else {
             v = cpx[at];
         }
-        sh[j * n + (reverseBits(i) >> shift)] = v;
+        sh[j * n + (i % radix) * m + (reverseBits(i / radix) >> shift)] = v;
     }
     workgroupBarrier();
     let sign = select(1.0, -1.0, P.inverse == 1u);
+    let halfm = m / 2u;
     let halfn = n / 2u;
     for (var s = 1u; s <= P.log2n; s++) {
         let half = 1u << (s - 1u);
+        // Twiddle k of this stage: exp(∓2πik/2^s), entry k·n/2^s of the table.
+        let stride = n >> s;
         for (var q = t; q < lines * halfn; q += WG) {
             let j = q / halfn;
-            let bf = q % halfn;
+            let bq = q % halfn;
+            let blk = bq / halfm;
+            let bf = bq % halfm;
             let k = bf & (half - 1u);
-            let i0 = j * n + ((bf >> (s - 1u)) << s) + k;
+            let i0 = j * n + blk * m + ((bf >> (s - 1u)) << s) + k;
             let i1 = i0 + half;
-            let ti = P.tw + 2u * (k << (P.log2n - s));
+            let ti = P.tw + 2u * (k * stride);
             let w = vec2<f32>(consts[ti], sign * consts[ti + 1u]);
             let u = sh[i0];
             let x = sh[i1];
@@ -146,11 +162,36 @@ fn fft(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) t:
         }
         workgroupBarrier();
     }
+    if radix == 3u {
+        // ω₃ = exp(∓2πi/3): entry m of the table.
+        let w3 = vec2<f32>(consts[P.tw + 2u * m], sign * consts[P.tw + 2u * m + 1u]);
+        for (var q = t; q < lines * m; q += WG) {
+            let j = q / m;
+            let k = q % m;
+            let i0 = j * n + k;
+            let t1 = P.tw + 2u * k;
+            let t2 = P.tw + 2u * (2u * k);
+            let w1 = vec2<f32>(consts[t1], sign * consts[t1 + 1u]);
+            let w2 = vec2<f32>(consts[t2], sign * consts[t2 + 1u]);
+            let f0 = sh[i0];
+            let f1 = cmul(sh[i0 + m], w1);
+            let f2 = cmul(sh[i0 + 2u * m], w2);
+            let a1 = cmul(f1, w3);
+            let a2 = cmul(f2, w3);
+            sh[i0] = f0 + f1 + f2;
+            sh[i0 + m] = f0 + a1 + cmul(a2, w3);
+            sh[i0 + 2u * m] = f0 + cmul(a1, w3) + a2;
+        }
+        workgroupBarrier();
+    }
     let scale = 1.0 / f32(P.nn);
     for (var e = t; e < total; e += WG) {
         let ji = line_element(e, lines);
         let j = ji.x;
         let i = ji.y;
+        if first + j >= n * n {
+            continue;
+        }
         let at = line_at(b, first + j, i);
         if (P.ends & 2u) != 0u {
             vecs[P.dst * P.stride + at] = sh[j * n + i].x * scale;
@@ -158,6 +199,10 @@ fn fft(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) t:
             cpx[at] = sh[j * n + i];
         }
     }
+}
+
+fn cmul(a: vec2<f32>, b: vec2<f32>) -> vec2<f32> {
+    return vec2<f32>(a.x * b.x - a.y * b.y, a.x * b.y + a.y * b.x);
 }
 
 // Element e of a workgroup's lines as (line, node): lines along x node-fastest, lines along
