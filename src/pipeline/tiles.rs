@@ -51,7 +51,7 @@ pub struct TileJob<'a> {
     pub params: &'a ReconParams,
     /// The coarse solution.
     pub coarse: &'a CoarseField,
-    /// Which coarse voxels hold input points (for `--trim`).
+    /// Which voxels hold input points (for `--trim`).
     pub support: &'a Support,
     /// The refined leaves (those with a detail).
     pub refined: &'a BTreeSet<CellKey>,

@@ -3,7 +3,8 @@
 
 use crate::types::TileMesh;
 
-/// Which coarse voxels hold input points (for `--trim`).
+/// Which voxels of a grid over the cube hold input points (for `--trim`: the finest level's
+/// coarse voxels where the budget allows, `pipeline::reconstruct`).
 pub struct Support {
     origin: [f64; 3],
     inv_h: f64,
@@ -12,8 +13,7 @@ pub struct Support {
 }
 
 impl Support {
-    /// No voxel marked, on a grid of `n³` voxels of edge `spacing` from `origin` (the coarse
-    /// voxels of the cube).
+    /// No voxel marked, on a grid of `n³` voxels of edge `spacing` from `origin`.
     pub fn new(origin: [f64; 3], spacing: f64, n: u64) -> Support {
         Support {
             origin,
@@ -21,6 +21,11 @@ impl Support {
             n: n as i64,
             bits: vec![0u64; Support::words(n)],
         }
+    }
+
+    /// Bytes of the bits of a grid of `n³` voxels.
+    pub fn bytes(n: u64) -> u64 {
+        Support::words(n) as u64 * 8
     }
 
     /// Words of bits a grid of `n³` voxels takes.
@@ -73,7 +78,7 @@ impl Support {
         self.mark_index(self.index(p));
     }
 
-    /// True when a point lies in the coarse voxel of `p` or one of its 26 neighbours.
+    /// True when a point lies in the voxel of `p` or one of its 26 neighbours.
     pub fn near(&self, p: [f64; 3]) -> bool {
         let c = self.cell(p);
         for dz in -1..=1 {
