@@ -582,8 +582,8 @@ impl<'a> PointSource<'a> {
         Ok(out)
     }
 
-    /// For each leaf `key` of a wave, the points of its 1.3125× box ([`LEAF_REACH`]), and how many of them (the
-    /// first ones) lie in the cell itself; read by the workers of `pool`
+    /// For each leaf `key` of a wave, the points of its 1.3125× box ([`LEAF_REACH`]), and how
+    /// many of them (the first ones) lie in the cell itself; read by the workers of `pool`
     /// ([`PointSource::read_wave`]).
     pub fn gather_wave(
         &mut self,

@@ -588,8 +588,17 @@ fn support_grid(fine: &Plan, plan: &Plan, total: u64) -> (f64, u64) {
     (plan.cube.size / cells as f64, cells)
 }
 
+/// The permit of what the coarse pass leaves for the rest of the run: the coarse solution,
+/// the sampling density and the support's bits (`support_n` voxels an edge).
+fn acquire_coarse_results(plan: &Plan, support_n: u64, ctx: &Ctx) -> Result<Permit> {
+    ctx.budget.acquire_now(
+        plan.coarse_field_bytes() + plan.density_bytes() + Support::bytes(support_n),
+        "the coarse solution, the sampling density and the trim support",
+    )
+}
+
 /// What the coarse pass leaves: the coarse solution (its permit held while it lives), the
-/// occupied leaf cells, and which coarse voxels hold points.
+/// occupied leaf cells, and which voxels of the trim support hold points ([`support_grid`]).
 struct CoarsePass {
     field: CoarseField,
     /// Every sample's share of the surface ([`crate::recon::density`]).
@@ -792,7 +801,7 @@ fn density_pass(
 
 /// Pass 1: splat every point into the coarse grid of `plan` (the top level), each normal
 /// weighed by its sample's share of the surface (pass 0); collect the occupied leaf cells of
-/// `fine` (the finest level), the noise in its voxels, the coarse voxels holding points, and
+/// `fine` (the finest level), the noise in its voxels, the support's voxels holding points, and
 /// the moments that refuse planar and linear inputs; solve. Each store cell's share
 /// ([`CellSplat`]: its splat and screening aggregates apart from the grids, and the rest) is
 /// computed on its own, in parallel; the shares are added in cell order, the grids' in
@@ -933,10 +942,7 @@ fn coarse_pass(
     // From here on only the solution and the density grid are held (the plan counted on
     // them for the leaf pass).
     drop(permit);
-    let permit = ctx.budget.acquire_now(
-        plan.coarse_field_bytes() + plan.density_bytes() + Support::bytes(support_n),
-        "the coarse solution and the sampling density",
-    )?;
+    let permit = acquire_coarse_results(plan, support_n, ctx)?;
     stage.finish(None);
     Ok(CoarsePass {
         field,
@@ -984,10 +990,7 @@ fn coarse_or_checkpoint(
             )
         };
         let (support_h, support_n) = support_grid(fine, plan, ctx.budget.total());
-        let permit = ctx.budget.acquire_now(
-            plan.coarse_field_bytes() + plan.density_bytes() + Support::bytes(support_n),
-            "the coarse solution and the sampling density",
-        )?;
+        let permit = acquire_coarse_results(plan, support_n, ctx)?;
         if c.field.len() as u64 != plan.coarse_nodes.pow(3) {
             return Err(bad("the coarse solution"));
         }
@@ -1276,6 +1279,39 @@ fn leaf_pass(
 mod tests {
     use super::*;
     use crate::types::Cube;
+
+    /// The trim support is the finest level's coarse grid where its bits fit a 32nd of the
+    /// budget, halved where they do not, and never coarser than the dense solve's grid.
+    #[test]
+    fn the_trim_support_is_the_finest_coarse_grid_the_budget_allows() {
+        let cube = Cube {
+            origin: [0.0; 3],
+            size: 2.0,
+        };
+        let g = 1u64 << 30;
+        for (depth, mem, cells) in [
+            (10, 64 << 20, 256),
+            (11, 4 * g, 512),
+            (12, 4 * g, 1024),
+            (13, 4 * g, 1024),
+            (13, 16 * g, 1024),
+            (13, 32 * g, 2048),
+            (13, 64 << 20, 256),
+        ] {
+            let levels =
+                crate::recon::plan::levels(cube, depth, 1.0, 4.0, None, None, plan_budget(mem))
+                    .unwrap();
+            let (fine, top) = (&levels[0], levels.last().unwrap());
+            let (h, n) = support_grid(fine, top, mem);
+            assert_eq!(
+                n,
+                cells.max(top.coarse_cells()),
+                "depth {depth}, --mem {mem}"
+            );
+            assert_eq!(h * n as f64, cube.size);
+            assert!(Support::bytes(n) <= mem / SUPPORT_BUDGET_DIVISOR || n == top.coarse_cells());
+        }
+    }
 
     /// At the least budget of every depth the levels' top coarse solve and leaf pass fit
     /// their slices, and it is never below the floor.

@@ -177,7 +177,7 @@ pub fn solve_leaf(
     );
     let m = plan.detail_n();
     let nc = coarse_local.n;
-    // Per axis, detail node s sits on fine node q = E/2 − ov + s, between coarse nodes
+    // Per axis, detail node s sits on fine node q = pad − ov + s, between coarse nodes
     // ⌊q/r⌋ and ⌊q/r⌋ + 1 (clamped) with weights 1 − t and t, t = (q mod r)/r.
     let r = plan.coarse_ratio as i64;
     let q0 = plan.leaf_pad() as i64 - plan.overlap_voxels as i64;
