@@ -58,11 +58,19 @@ pub fn summary(st: &HexStats, output: &Path) -> Result<()> {
         st.param.energy_continuous,
         st.param.energy_final
     );
+    if st.grid_fallback.is_some() {
+        outln!(
+            "grid: the aligned map flipped {} tetrahedra before any rounding, so the hexahedra are the grid of the axes at edge {:.6}, unaligned",
+            st.param.flipped_continuous,
+            st.scale
+        );
+    }
     if let Some(p) = &st.pillow {
         outln!(
-            "pillowing: {} boundary hexahedra added ({} had two or more faces on the boundary)",
+            "pillowing: {} boundary hexahedra added ({} had two or more faces on the boundary; {} removed first so that it could be pillowed)",
             p.boundary_quads,
-            p.multi_face_hexes
+            p.multi_face_hexes,
+            p.removed
         );
     }
     let s = st.seconds;

@@ -26,7 +26,10 @@
 //!    hexahedron) move the same way and are then projected onto the input boundary surface,
 //!    a triangle soup, by a closest-point query over a bounding-volume hierarchy of its
 //!    triangles (axis-aligned boxes, median splits; the closest point on a triangle by
-//!    Ericson's region test, "Real-Time Collision Detection", 2005, §5.1.5). Boundary
+//!    Ericson's region test, "Real-Time Collision Detection", 2005, §5.1.5), among the
+//!    triangles facing the way the vertex's quadrilaterals face (so that where the solid is
+//!    thinner than the hexahedra a vertex keeps to its side; any triangle when none does).
+//!    Boundary
 //!    vertices where the boundary quadrilaterals around them bend by more than
 //!    [`RelaxParams::feature_angle_deg`] (the mesh's corners and sharp edges) are held fixed,
 //!    so that projection cannot round off features; so are all boundary vertices when no
@@ -386,6 +389,21 @@ impl Bvh {
     /// The closest point to `p` on the triangles and its squared distance; `None` without
     /// triangles. Ties go to the triangle met first in a fixed traversal order.
     pub fn closest(&self, p: [f64; 3]) -> Option<([f64; 3], f64)> {
+        self.closest_where(p, |_| true)
+    }
+
+    /// As [`Bvh::closest`], over the triangles whose normal (from their vertex order) makes
+    /// an acute angle with `n`: the near side of a thin part, not its far side nor a
+    /// neighbouring part's face turned towards it. `None` when no triangle faces `n`.
+    pub fn closest_facing(&self, p: [f64; 3], n: [f64; 3]) -> Option<([f64; 3], f64)> {
+        self.closest_where(p, |[a, b, c]| dot(cross(sub(*b, *a), sub(*c, *a)), n) > 0.0)
+    }
+
+    fn closest_where(
+        &self,
+        p: [f64; 3],
+        keep: impl Fn(&[[f64; 3]; 3]) -> bool,
+    ) -> Option<([f64; 3], f64)> {
         if self.nodes.is_empty() {
             return None;
         }
@@ -399,6 +417,9 @@ impl Bvh {
             if n.count > 0 {
                 let (a, b) = (n.first as usize, (n.first + n.count) as usize);
                 for &t in &self.order[a..b] {
+                    if !keep(&self.tris[t as usize]) {
+                        continue;
+                    }
                     let [x, y, z] = self.tris[t as usize];
                     let q = closest_on_triangle(p, x, y, z);
                     let d = dist2(p, q);
@@ -422,7 +443,7 @@ impl Bvh {
                 }
             }
         }
-        Some(best)
+        best.1.is_finite().then_some(best)
     }
 }
 
@@ -544,6 +565,17 @@ pub fn relax(
             }
         })
         .collect();
+    // A surface vertex goes to the nearest surface point facing its own quadrilaterals' way,
+    // so that where the solid is thin it stays on its side (and off a neighbouring part).
+    let outward: Vec<[f64; 3]> = normals
+        .iter()
+        .map(|ns| ns.iter().fold([0.0; 3], |a, &b| add(a, b)))
+        .collect();
+    let project = |v: usize, y: [f64; 3]| {
+        bvh.closest_facing(y, outward[v])
+            .or_else(|| bvh.closest(y))
+            .map(|(q, _)| q)
+    };
     report.interior_vertices = kind.iter().filter(|&&k| k == Kind::Interior).count();
     report.surface_vertices = kind.iter().filter(|&&k| k == Kind::Surface).count();
     report.fixed_vertices = nv - report.interior_vertices - report.surface_vertices;
@@ -602,7 +634,7 @@ pub fn relax(
                 let d = scale(d, alpha[v] / list.len() as f64);
                 let mut y = add(verts[v], d);
                 if kind[v] == Kind::Surface
-                    && let Some((q, _)) = bvh.closest(y)
+                    && let Some(q) = project(v, y)
                 {
                     y = q;
                 }
@@ -720,7 +752,7 @@ pub fn relax(
         for v in 0..nv {
             if kind[v] == Kind::Surface
                 && hex.verts[v] != before[v]
-                && let Some((q, _)) = bvh.closest(hex.verts[v])
+                && let Some(q) = project(v, hex.verts[v])
             {
                 hex.verts[v] = q;
             }

@@ -19,6 +19,17 @@
 //! retried. The fandisk at its default edge 2.18 folds two hexahedra at a corner; at 1.85,
 //! the next edge, none (measured; 2.0 and 1.4 fold, 1.5 to 1.85 do not: the rounding, not
 //! the edge's size, decides). An explicit `--scale` is tried alone.
+//!
+//! **Grid.** Where the polycube or constant field's aligned map flips tetrahedra before any
+//! rounding, no aligned map of that field fits the shape (a labelling that is no polycube:
+//! the octopus's curled arms). The run then meshes the grid of the axes without boundary
+//! alignment, as octree meshers do (Schneiders, "A grid-based algorithm for the generation of
+//! hexahedral element meshes", 1996): the map `x / s` (identity transitions, nothing to
+//! round), the cubes wholly inside extracted, those whose boundary would not pillow removed
+//! ([`crate::hex::pillow::make_pillowable`]), then the boundary layer and the relaxation onto
+//! the surface. Its hexahedra ignore the shape's directions; the warning and the report's
+//! `grid_fallback` say why it was used. Its edge is `--scale`, else the smaller of the default
+//! edge and the volume over the boundary's area, so that thin parts hold whole cubes.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -28,8 +39,8 @@ use crate::exec::Ctx;
 use crate::hex::extract::{ExtractReport, extract};
 use crate::hex::frames::{self, Singularities};
 use crate::hex::mesh::{Frame, HexMesh, TetMesh};
-use crate::hex::param::{Field, ParamParams, ParamReport, parameterise_with};
-use crate::hex::pillow::{PillowReport, pillow};
+use crate::hex::param::{Field, GridMap, ParamParams, ParamReport, Transition, parameterise_with};
+use crate::hex::pillow::{PillowReport, make_pillowable, pillow};
 use crate::hex::polycube::{Polycube, PolycubeParams, PolycubeReport, polycube_frames};
 use crate::hex::quality::{HexQuality, MeshQuality, hex_qualities, summarise};
 use crate::hex::relax::{RelaxParams, RelaxReport, relax};
@@ -38,6 +49,7 @@ use crate::hex::smooth_frames::{SmoothParams, SmoothReport, smooth_frames};
 use crate::hex::stuffing::{StuffingParams, StuffingReport, stuff};
 use crate::hex::topology::{Topology, check_tets};
 use crate::hex::winding::WindingNumber;
+use crate::synth::vec::{cross, norm, sub};
 use crate::types::Aabb;
 
 /// Where the frames come from (§3.2).
@@ -97,9 +109,13 @@ pub struct HexStats {
     pub polycube: Option<PolycubeReport>,
     /// Interior edges between boundary vertices split before the polycube map (new vertices).
     pub chords_split: usize,
-    /// What the map's gradients were drawn towards: `frames`, or `deformation` (the polycube
-    /// deformation's gradients, tried when the frames' map flipped tetrahedra).
+    /// What the map's gradients were drawn towards: `frames`, `deformation` (the polycube
+    /// deformation's gradients, tried when the frames' map flipped tetrahedra), or `grid`
+    /// (the axes, unaligned, when no aligned map fitted: module docs, "Grid").
     pub targets: &'static str,
+    /// Why the aligned map was given up for the grid of the axes (module docs, "Grid"); its
+    /// figures are `param`'s.
+    pub grid_fallback: Option<String>,
     /// The singularity graph.
     pub singularities: Singularities,
     /// Singular edges of valence 3, 5 and 6.
@@ -227,6 +243,8 @@ pub struct HexFailure {
     pub chords_split: usize,
     /// The parameterisation, when it ran (the rounding that flipped tetrahedra is named).
     pub param: Option<ParamReport>,
+    /// Why the aligned map was given up for the grid of the axes, when it was.
+    pub grid_fallback: Option<String>,
     /// The pillowing, when it ran.
     pub pillow: Option<PillowReport>,
     /// The relaxation, when it ran.
@@ -339,9 +357,41 @@ fn run(job: &HexJob, ctx: &Ctx, failure: &mut HexFailure) -> Result<HexStats> {
     failure.tries.clear();
     for (i, &s) in scales.iter().enumerate() {
         let last = i + 1 == scales.len();
+        let mut scale_used = s;
         failure.scale = s;
-        let meshed = match mesh_at(job, ctx, &prepared, s, last, &mut seconds, failure) {
+        let meshed = match mesh_at(job, ctx, &prepared, s, None, last, failure) {
             Ok(m) => m,
+            Err(f)
+                if f.unfit
+                    && matches!(job.frames, FrameChoice::Polycube | FrameChoice::Constant) =>
+            {
+                // No aligned map of this field fits the shape: the axes' grid, unaligned
+                // (module docs, "Grid"), at the given edge or one that resolves the solid.
+                let g = job.scale.unwrap_or_else(|| grid_scale(&mesh, &topo, s));
+                log::warn!(
+                    "{}: {}; meshing the grid of the axes at edge {g:.6} instead, its staircase pillowed",
+                    path.display(),
+                    f.reason
+                );
+                failure.grid_fallback = Some(f.reason.clone());
+                failure.scale = g;
+                let aligned = failure.param.clone().unwrap_or_default();
+                match mesh_at(job, ctx, &prepared, g, Some(&aligned), true, failure) {
+                    Ok(m) => {
+                        scale_used = g;
+                        m
+                    }
+                    Err(e) => {
+                        return Err(Error::input(
+                            path,
+                            format!(
+                                "{}; the grid of the axes at edge {g:.6} failed too: {}",
+                                f.reason, e.reason
+                            ),
+                        ));
+                    }
+                }
+            }
             Err(f) if f.retry && !last => {
                 let next = scales[i + 1];
                 log::warn!(
@@ -381,7 +431,8 @@ fn run(job: &HexJob, ctx: &Ctx, failure: &mut HexFailure) -> Result<HexStats> {
         crate::io::volume::write_hex(&job.output, &meshed.hexes, &[("scaled_jacobian", &sj)])?;
         return Ok(HexStats {
             tets: mesh.tets.len(),
-            scale: s,
+            scale: scale_used,
+            grid_fallback: failure.grid_fallback.take(),
             tries: std::mem::take(&mut failure.tries),
             stuffing,
             smooth,
@@ -395,10 +446,30 @@ fn run(job: &HexJob, ctx: &Ctx, failure: &mut HexFailure) -> Result<HexStats> {
             pillow: meshed.pillow,
             relax: meshed.relax,
             quality: meshed.quality,
-            seconds,
+            seconds: failure.seconds,
         });
     }
     unreachable!("at least one scale is tried")
+}
+
+/// The grid's edge without `--scale`: the default edge `s`, or the solid's volume over its
+/// boundary's area where that is smaller (half a slab's thickness, a quarter of a rod's
+/// diameter), so that the cubes wholly inside reach into its thin parts.
+fn grid_scale(mesh: &TetMesh, topo: &Topology, s: f64) -> f64 {
+    let volume: f64 = (0..mesh.tets.len()).map(|t| mesh.volume(t)).sum();
+    let area: f64 = topo
+        .boundary_triangles(mesh)
+        .iter()
+        .map(|t| {
+            let [a, b, c] = t.map(|v| mesh.verts[v as usize]);
+            0.5 * norm(cross(sub(b, a), sub(c, a)))
+        })
+        .sum();
+    if area > 0.0 && volume > 0.0 {
+        s.min(volume / area)
+    } else {
+        s
+    }
 }
 
 /// Default edges tried when `--scale` is not given: the first, then each this much finer.
@@ -444,6 +515,8 @@ struct Meshed {
 struct Failed {
     reason: String,
     retry: bool,
+    /// The field's map flipped tetrahedra before any rounding: it does not fit the shape.
+    unfit: bool,
 }
 
 /// Parameterise at hex edge `scale`, extract, pillow, relax and measure. Inverted hexahedra
@@ -453,13 +526,16 @@ fn mesh_at(
     ctx: &Ctx,
     p: &Prepared,
     scale: f64,
+    grid: Option<&ParamReport>,
     last: bool,
-    seconds: &mut [f64; 5],
     failure: &mut HexFailure,
 ) -> std::result::Result<Meshed, Failed> {
+    // Seconds per step accumulate in the failure report, which the success takes over.
+    let seconds = &mut failure.seconds;
     let fatal = |e: String| Failed {
         reason: e,
         retry: false,
+        unfit: false,
     };
     let clock = Instant::now();
     let params = ParamParams {
@@ -474,9 +550,24 @@ fn mesh_at(
         singular: &p.singular.edges,
     };
     let mut targets = "frames";
-    let (mut map, mut param) =
-        parameterise_with(p.mesh, p.topo, &input, &params).map_err(|e| fatal(e.to_string()))?;
-    if param.flipped_final > 0
+    let (mut map, mut param) = match grid {
+        // The axes' grid, unaligned (module docs, "Grid"): the map is `x / scale`.
+        Some(aligned) => {
+            targets = "grid";
+            let map = GridMap {
+                uvw: (0..p.mesh.tets.len())
+                    .map(|t| p.mesh.corners(t).map(|x| x.map(|c| c / scale)))
+                    .collect(),
+                transitions: vec![[Transition::ID; 4]; p.mesh.tets.len()],
+            };
+            (map, aligned.clone())
+        }
+        None => {
+            parameterise_with(p.mesh, p.topo, &input, &params).map_err(|e| fatal(e.to_string()))?
+        }
+    };
+    if grid.is_none()
+        && param.flipped_final > 0
         && let Some(c) = p.polycube
     {
         input.targets = &c.gradients;
@@ -488,8 +579,7 @@ fn mesh_at(
     }
     seconds[2] += clock.elapsed().as_secs_f64();
     failure.param = Some(param.clone());
-    failure.seconds = *seconds;
-    if param.flipped_final > 0 {
+    if grid.is_none() && param.flipped_final > 0 {
         let cause = match &param.first_flip {
             Some(c) if param.flipped_continuous == 0 => format!(
                 "; the first flips came with rounding round {} ({}), tetrahedra {:?}",
@@ -514,6 +604,7 @@ fn mesh_at(
             ),
             // Flips before any rounding are the field's, at every edge.
             retry: param.flipped_continuous == 0,
+            unfit: param.flipped_continuous > 0,
         });
     }
 
@@ -526,15 +617,25 @@ fn mesh_at(
                 "no hexahedron fits inside at --scale {scale}: choose a smaller --scale"
             ),
             retry: true,
+            unfit: false,
         });
     }
 
     let clock = Instant::now();
-    let polycube_run = job.frames == FrameChoice::Polycube;
-    let pillowed = job
-        .pillow
-        .unwrap_or(polycube_run)
-        .then(|| pillow(&mut hexes));
+    // A polycube map's corners, and a grid's staircase, need the boundary layer; the grid's
+    // staircase first loses the cubes that touch along an edge or wrap around a vertex.
+    let polycube_run = job.frames == FrameChoice::Polycube || grid.is_some();
+    let pillowed = job.pillow.unwrap_or(polycube_run).then(|| {
+        let removed = if grid.is_some() {
+            make_pillowable(&mut hexes)
+        } else {
+            0
+        };
+        PillowReport {
+            removed,
+            ..pillow(&mut hexes)
+        }
+    });
     let relaxed = job.relax.then(|| {
         let tris = p.topo.boundary_triangles(p.mesh);
         // A polycube map's corners and edges lie where the solid is smooth: the boundary
@@ -554,7 +655,6 @@ fn mesh_at(
     failure.quality = Some(quality.clone());
     failure.pillow = pillowed.clone();
     failure.relax = relaxed.clone();
-    failure.seconds = *seconds;
     if quality.inverted > 0 && !(job.keep_inverted && last) {
         let worst: Vec<String> = quality
             .worst_hexes
@@ -581,6 +681,7 @@ fn mesh_at(
                 worst.join(", ")
             ),
             retry: true,
+            unfit: false,
         });
     }
     Ok(Meshed {
