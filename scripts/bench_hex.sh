@@ -26,6 +26,9 @@
 #   SHAPES="box cylinder torus"  THREADS=2  PEER_TIMEOUT=600  SAMPLES=20000 (hex_check.py)
 #   HEX_OPTS_box=""  HEX_OPTS_cylinder=""  HEX_OPTS_torus="--scale 0.1"   extra hexmesh options
 #   K156="cylinder:0.16 box:0.125"   SHAPE:SCALE for the 156K-tet cases (K156= skips them)
+#   TETS="octopus:PATH fandisk:PATH"   NAME:FILE tetrahedral meshes meshed at the default edge,
+#                    measured against their own boundary, scanflow only (TETS= skips them;
+#                    the defaults are the test data beside the repository, skipped if absent)
 #   GMSH_FACTORS="1 2"   gmsh mesh size / scanflow's hex edge;  PEERS=0  scanflow only
 #   BUILD=0          use the existing target/release/scanflow;  SCANFLOW=PATH  binary to measure
 #   KEEP=DIR         keep surfaces, meshes, reports, logs and rows.jsonl in DIR
@@ -38,6 +41,7 @@ PEERS=${PEERS:-1}
 PEER_TIMEOUT=${PEER_TIMEOUT:-600}
 SAMPLES=${SAMPLES:-20000}
 K156=${K156-cylinder:0.16 box:0.125}
+TETS=${TETS-octopus:../shared/data/tetmesh/octopus-low.mesh fandisk:../shared/data/tetmesh/fandisk.mesh}
 GMSH_FACTORS=${GMSH_FACTORS:-1 2}
 HEX_OPTS_box=${HEX_OPTS_box-}
 HEX_OPTS_cylinder=${HEX_OPTS_cylinder-}
@@ -71,10 +75,10 @@ echo "shapes: $SHAPES; 156K cases: ${K156:-none}; gmsh size factors: $GMSH_FACTO
 echo "load average before: $(cut -d' ' -f1-3 /proc/loadavg 2>/dev/null || echo ?) (a busy machine slows every side)"
 python3 scripts/hex_peers.py gen "$TMP" --shapes "$all_shapes" > "$TMP/shapes.json"
 
-# run_case CASE SHAPE HEXMESH_OPTION...
+# run_case CASE INPUT HEXMESH_OPTION...   (INPUT: a surface, or a tet mesh: no gmsh row then)
 run_case() {
-  local case=$1 shape=$2; shift 2
-  local surf=$TMP/$shape.ply out=$TMP/${case}_scanflow rc=0
+  local case=$1 surf=$2; shift 2
+  local out=$TMP/${case}_scanflow rc=0
   cat "$surf" > /dev/null   # warm page cache
   echo "[$case] scanflow hexmesh $* ..." >&2
   /usr/bin/time -v -o "$out.time" timeout "$PEER_TIMEOUT" "$BIN" hexmesh "$surf" -o "$out.vtk" \
@@ -82,6 +86,7 @@ run_case() {
   python3 scripts/hex_peers.py scanflow --case "$case" --surface "$surf" --mesh "$out.vtk" --report "$out.json" \
     --time "$out.time" --rc "$rc" --log "$out.log" --timeout "$PEER_TIMEOUT" --samples "$SAMPLES" >> "$ROWS"
   [ "$PEERS" != 0 ] || return 0
+  case $surf in *.mesh|*.msh|*.vtk) return 0 ;; esac
   local edge
   edge=$(tail -n 1 "$ROWS" | python3 -c 'import json, sys; r = json.load(sys.stdin); print(r.get("scale") or "")')
   if [ -z "$edge" ]; then echo "[$case] no hex edge from scanflow's report: gmsh skipped" >&2; return 0; fi
@@ -98,10 +103,14 @@ run_case() {
 for shape in $SHAPES; do
   var=HEX_OPTS_$shape
   read -r -a opts <<< "${!var-}"
-  run_case "$shape" "$shape" "${opts[@]}"
+  run_case "$shape" "$TMP/$shape.ply" "${opts[@]}"
 done
 for k in $K156; do
-  run_case "${k%%:*}-156K" "${k%%:*}" --scale "${k##*:}"
+  run_case "${k%%:*}-156K" "$TMP/${k%%:*}.ply" --scale "${k##*:}"
+done
+for k in $TETS; do
+  if [ -f "${k#*:}" ]; then run_case "${k%%:*}" "${k#*:}"
+  else echo "[${k%%:*}] ${k#*:} not found: skipped" >&2; fi
 done
 
 echo
