@@ -927,6 +927,35 @@ pub(crate) mod tests {
     }
 
     #[test]
+    fn a_vertex_in_a_thin_slab_keeps_to_its_side() {
+        // A slab 0.1 thick (top at z = 0.1 facing up, bottom at z = 0 facing down) and a
+        // vertex just below the middle: the nearest face is the bottom, but a vertex whose
+        // quadrilaterals face up goes to the top.
+        let verts = vec![
+            [-1.0, -1.0, 0.0],
+            [1.0, -1.0, 0.0],
+            [1.0, 1.0, 0.0],
+            [-1.0, -1.0, 0.1],
+            [1.0, -1.0, 0.1],
+            [1.0, 1.0, 0.1],
+        ];
+        let tris = vec![[0, 2, 1], [3, 4, 5]];
+        let bvh = Bvh::new(&verts, &tris);
+        let p = [0.5, 0.0, 0.04];
+        let (q, _) = bvh.closest(p).unwrap();
+        assert!(q[2].abs() < 1e-12, "{q:?}");
+        let (q, d2) = bvh.closest_facing(p, [0.0, 0.0, 1.0]).unwrap();
+        assert!(
+            (q[2] - 0.1).abs() < 1e-12 && (d2 - 0.06 * 0.06).abs() < 1e-12,
+            "{q:?}"
+        );
+        let (q, _) = bvh.closest_facing(p, [0.0, 0.0, -1.0]).unwrap();
+        assert!(q[2].abs() < 1e-12, "{q:?}");
+        // Nothing faces sideways.
+        assert!(bvh.closest_facing(p, [1.0, 0.0, 0.0]).is_none());
+    }
+
+    #[test]
     fn a_regular_grid_is_a_fixed_point() {
         let mut m = grid(3);
         let before = m.clone();

@@ -695,3 +695,26 @@ fn mesh_at(
         relax: relaxed,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_grid_edge_is_the_volume_over_the_area_where_that_is_finer() {
+        // A 4 × 3 × 2 box: volume 24 over area 52 = 0.4615.
+        let m = TetMesh::grid_box([4, 3, 2], 1.0);
+        let topo = check_tets(&m).unwrap();
+        assert!((grid_scale(&m, &topo, 1.0) - 24.0 / 52.0).abs() < 1e-12);
+        // A coarser volume over area leaves the default edge.
+        assert_eq!(grid_scale(&m, &topo, 0.25), 0.25);
+        // A slab 0.1 thick: half its thickness (the sides' area counts a little).
+        let mut slab = TetMesh::grid_box([4, 4, 1], 1.0);
+        for p in &mut slab.verts {
+            p[2] *= 0.1;
+        }
+        let topo = check_tets(&slab).unwrap();
+        let g = grid_scale(&slab, &topo, 1.0);
+        assert!((g - 1.6 / (32.0 + 1.6)).abs() < 1e-12, "{g}");
+    }
+}
