@@ -7,6 +7,10 @@
 //!   ─▶ parameterisation with greedy rounding (§3.1) ─▶ hex extraction ─▶ relaxation ─▶ quality
 //! ```
 //!
+//! Where a polycube or constant field's aligned map cannot be made injective (it flips
+//! tetrahedra before any rounding), the pipeline meshes the grid of the axes unaligned
+//! instead (`pipeline::hexmesh`, "Grid"): the same extraction, pillowing and relaxation.
+//!
 //! * [`mesh`]: the tetrahedral and hexahedral meshes and their orientation conventions.
 //! * [`rotation`]: the 24 cube rotations, matchings between frames, edge holonomy (§2.1–2.2).
 //! * [`topology`]: the checks of an input tetrahedral mesh (named elements) and edge stars.
@@ -19,7 +23,8 @@
 //! * [`stuffing`], [`winding`]: tetrahedra of a closed surface's inside (isosurface stuffing
 //!   with the generalised winding number).
 //! * [`extract`]: hexahedra from an integer-grid map by walks from cube centres to corners.
-//! * [`pillow`]: a layer of hexahedra along the boundary (for polycube corners).
+//! * [`pillow`]: a layer of hexahedra along the boundary (for polycube corners, and for the
+//!   staircase of a grid, made pillowable first).
 //! * [`relax`]: relaxation of the extracted mesh towards ideal cubes, boundary on the surface.
 //! * [`untangle`]: inverted tetrahedra of a rounded map turned back (foldover-free maps).
 
