@@ -103,7 +103,33 @@ impl TetMesh {
     }
 }
 
+/// The normal of quadrilateral `x` (corners in order), not normalised: the cross product of
+/// its diagonals, twice its area for a planar one, pointing the way the order turns.
+pub fn quad_normal(x: [[f64; 3]; 4]) -> [f64; 3] {
+    use crate::synth::vec::{cross, sub};
+    cross(sub(x[2], x[0]), sub(x[3], x[1]))
+}
+
 impl HexMesh {
+    /// Per vertex, the unit outward normals ([`quad_normal`]) of the boundary quadrilaterals
+    /// at it, in [`HexMesh::boundary_quads`]' order; a zero vector for a collapsed one. Empty
+    /// for a vertex off the boundary.
+    pub fn boundary_normals(&self) -> Vec<Vec<[f64; 3]>> {
+        use super::quality::HEX_FACES;
+        use crate::synth::vec::{norm, scale};
+        let mut normals = vec![Vec::new(); self.verts.len()];
+        for (h, f) in self.boundary_quads() {
+            let q = HEX_FACES[f as usize].map(|i| self.hexes[h as usize][i]);
+            let n = quad_normal(q.map(|v| self.verts[v as usize]));
+            let len = norm(n);
+            let n = if len > 0.0 { scale(n, 1.0 / len) } else { n };
+            for v in q {
+                normals[v as usize].push(n);
+            }
+        }
+        normals
+    }
+
     /// The boundary quadrilaterals (faces of exactly one hexahedron) as (hexahedron, local
     /// face of [`super::quality::HEX_FACES`], outward), sorted.
     pub fn boundary_quads(&self) -> Vec<(u32, u8)> {

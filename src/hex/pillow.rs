@@ -15,9 +15,9 @@
 //! of the hexahedra around it: inwards even at corners and edges, where a normal is not
 //! defined.
 
-use super::mesh::HexMesh;
+use super::mesh::{HexMesh, quad_normal};
 use super::quality::HEX_FACES;
-use crate::synth::vec::{add, cross, dot, scale, sub};
+use crate::synth::vec::{add, dot, scale, sub};
 
 /// How far an inner copy starts from its boundary vertex, as a fraction of the way to the
 /// mean centroid of the hexahedra around it.
@@ -86,18 +86,10 @@ pub fn pillow(mesh: &mut HexMesh) -> PillowReport {
             t.1 += 1;
         }
     }
-    // The unit normals of each boundary vertex's quadrilaterals.
-    let mut normals: Vec<Vec<[f64; 3]>> = vec![Vec::new(); nv];
-    for &(h, f) in &boundary {
-        let q = HEX_FACES[f as usize].map(|i| mesh.hexes[h as usize][i]);
-        let x = q.map(|v| mesh.verts[v as usize]);
-        let n = cross(sub(x[2], x[0]), sub(x[3], x[1]));
-        let l = dot(n, n).sqrt();
-        if l > 0.0 {
-            for v in q {
-                normals[v as usize].push(scale(n, 1.0 / l));
-            }
-        }
+    // The unit normals of each boundary vertex's quadrilaterals (collapsed ones left out).
+    let mut normals = mesh.boundary_normals();
+    for ns in &mut normals {
+        ns.retain(|&n| n != [0.0; 3]);
     }
     let mut inner = vec![[0.0; 3]; report.boundary_vertices];
     for v in 0..nv {
@@ -209,10 +201,7 @@ pub fn make_pillowable(mesh: &mut HexMesh) -> usize {
             }
             // A vertex whose quadrilaterals face opposite ways (a staircase that wraps
             // around it) has no way in that suits them all: its copy would flatten one.
-            let facing = |k: u32| {
-                let x = quads[k as usize].map(|w| mesh.verts[w as usize]);
-                cross(sub(x[2], x[0]), sub(x[3], x[1]))
-            };
+            let facing = |k: u32| quad_normal(quads[k as usize].map(|w| mesh.verts[w as usize]));
             let opposed = run.iter().enumerate().any(|(j, &(_, a))| {
                 let na = facing(a);
                 run[j + 1..].iter().any(|&(_, b)| {

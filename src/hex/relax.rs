@@ -60,7 +60,7 @@
 //! gathered in index order, so the result is the same for any thread count.
 
 use crate::hex::mesh::HexMesh;
-use crate::hex::quality::{HEX_EDGES, HEX_FACES, hex_scaled_jacobian};
+use crate::hex::quality::{HEX_EDGES, hex_scaled_jacobian};
 use crate::hex::untangle::{Freedom, UntangleParams, UntangleReport, untangle_hexes};
 use crate::types::Aabb;
 use nalgebra::{Matrix3, Vector3};
@@ -537,16 +537,7 @@ pub fn relax(
     }
 
     // Boundary quadrilaterals: faces of exactly one hexahedron.
-    let mut normals: Vec<Vec<[f64; 3]>> = vec![Vec::new(); nv];
-    for (k, f) in hex.boundary_quads() {
-        let q = HEX_FACES[f as usize].map(|i| hex.verts[hex.hexes[k as usize][i] as usize]);
-        let n = cross(sub(q[2], q[0]), sub(q[3], q[1]));
-        let len = dot(n, n).sqrt();
-        let n = if len > 0.0 { scale(n, 1.0 / len) } else { n };
-        for i in HEX_FACES[f as usize] {
-            normals[hex.hexes[k as usize][i] as usize].push(n);
-        }
-    }
+    let normals = hex.boundary_normals();
     let bvh = Bvh::new(boundary_verts, boundary_tris);
     let cos_feature = params.feature_angle_deg.to_radians().cos();
     let kind: Vec<Kind> = (0..nv)

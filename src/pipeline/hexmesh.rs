@@ -49,7 +49,6 @@ use crate::hex::smooth_frames::{SmoothParams, SmoothReport, smooth_frames};
 use crate::hex::stuffing::{StuffingParams, StuffingReport, stuff};
 use crate::hex::topology::{Topology, check_tets};
 use crate::hex::winding::WindingNumber;
-use crate::synth::vec::{cross, norm, sub};
 use crate::types::Aabb;
 
 /// Where the frames come from (§3.2).
@@ -275,7 +274,7 @@ pub fn hexmesh(job: &HexJob, ctx: &Ctx) -> Result<HexStats> {
 
 fn run(job: &HexJob, ctx: &Ctx, failure: &mut HexFailure) -> Result<HexStats> {
     let path = &job.input;
-    let mut seconds = [0.0; 5];
+    // Seconds per step accumulate in the failure report, which the success takes over.
     let clock = Instant::now();
     let (mut mesh, mut topo, stuffing, scale) = read_tets(path, job.scale, job.tet_size)?;
     failure.scale = scale;
@@ -288,7 +287,7 @@ fn run(job: &HexJob, ctx: &Ctx, failure: &mut HexFailure) -> Result<HexStats> {
             topo = check_tets(&mesh).map_err(|e| Error::input(path, e.to_string()))?;
         }
     }
-    seconds[0] = clock.elapsed().as_secs_f64();
+    failure.seconds[0] = clock.elapsed().as_secs_f64();
     failure.tets = mesh.tets.len();
     failure.chords_split = chords_split;
 
@@ -323,10 +322,9 @@ fn run(job: &HexJob, ctx: &Ctx, failure: &mut HexFailure) -> Result<HexStats> {
         frames::matchings(&field, &topo)
     };
     let sing = frames::singularities(&mesh, &topo, &field, &m);
-    seconds[1] = clock.elapsed().as_secs_f64();
+    failure.seconds[1] = clock.elapsed().as_secs_f64();
     failure.smooth = smooth.clone();
     failure.polycube = polycube.as_ref().map(|p| p.report.clone());
-    failure.seconds = seconds;
     if let Some(first) = sing.invalid.first() {
         return Err(Error::input(
             path,
@@ -460,10 +458,7 @@ fn grid_scale(mesh: &TetMesh, topo: &Topology, s: f64) -> f64 {
     let area: f64 = topo
         .boundary_triangles(mesh)
         .iter()
-        .map(|t| {
-            let [a, b, c] = t.map(|v| mesh.verts[v as usize]);
-            0.5 * norm(cross(sub(b, a), sub(c, a)))
-        })
+        .map(|t| 0.5 * crate::metrics::double_area(&t.map(|v| mesh.verts[v as usize])))
         .sum();
     if area > 0.0 && volume > 0.0 {
         s.min(volume / area)
