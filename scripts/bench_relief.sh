@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # Fine relief, with and without noise: scanflow reconstruct (the default, screened with 4
-# lowered for noise beyond 0.85 voxel or 8 for precise samples, its Gaussian's width from the
-# measured precision, with the vertex fit; --point-weight auto, also raised for
+# lowered for noise beyond 0.85 voxel between close samples or 8 for precise samples, its
+# Gaussian's width from the measured precision narrowed by the noise's share of the quadrics'
+# residual, with the vertex fit, which noise beyond a third of a voxel stops; the *.log
+# summaries give the three noise figures; --point-weight auto, also raised for
 # precise samples: the *.log files give the weight and the measured noise; unscreened,
 # --point-weight 0; and the default with --no-fit) against PoissonRecon (screened, pymeshlab) and Open3D's Poisson on the same points, same
 # depth, same run (scripts/poisson_peer.py). A sphere of radius 1 carries the relief

@@ -63,9 +63,12 @@ pub fn ingest(st: &IngestStats, out: &Path) {
 /// `reconstruct`'s line: the whole run's time `total_secs` (ingest and normal estimation
 /// included, where the inputs were point files), then the solve and mesh's own.
 pub fn reconstruct(st: &ReconStats, out: &Path, total_secs: f64) {
+    let pairs = st
+        .pair_noise_voxels
+        .map_or_else(String::new, |p| format!(", {p:.3} between close samples"));
     let noise = match (st.noise_voxels, st.jet_noise_voxels) {
         (Some(s), Some(j)) => {
-            format!(" (noise {s:.3} voxel within a voxel, {j:.3} about local quadrics)")
+            format!(" (noise {s:.3} voxel within a voxel{pairs}, {j:.3} about local quadrics)")
         }
         (Some(s), None) => format!(" (noise {s:.3} voxel)"),
         _ => String::new(),

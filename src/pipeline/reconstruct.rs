@@ -187,6 +187,9 @@ pub struct ReconStats {
     /// The samples' spread across the surface in fine voxels, where one could be measured
     /// ([`crate::recon::screen::NoiseStats`]).
     pub noise_voxels: Option<f64>,
+    /// The samples' noise read from pairs of close samples in fine voxels, where enough
+    /// pairs were found ([`crate::recon::screen::NoiseStats::pair_sigma_voxels`]).
+    pub pair_noise_voxels: Option<f64>,
     /// The samples' spread about local quadric fits in fine voxels, where one could be
     /// measured ([`crate::recon::screen::NoiseStats::jet_sigma_voxels`]).
     pub jet_noise_voxels: Option<f64>,
@@ -314,6 +317,7 @@ pub fn reconstruct(
         p.point_weight = coarse.point_weight;
         p.sigma_vox = smoothing_on(params, &coarse.noise, spacing, p.spacing);
         p.noise_voxels = coarse.noise.sigma_voxels();
+        p.fit_noise_voxels = coarse.noise.fit_noise_voxels();
     }
     for i in 0..levels.len() {
         levels[i].coarse_sigma_vox = levels
@@ -432,6 +436,7 @@ pub fn reconstruct(
         smooth_voxels: plan.sigma_vox,
         sample_spacing_voxels: spacing.map(|s| s / plan.spacing),
         noise_voxels: plan.noise_voxels,
+        pair_noise_voxels: noise.pair_sigma_voxels(),
         jet_noise_voxels: noise.jet_sigma_voxels(),
         coarse_iterations,
         levels_above: above,

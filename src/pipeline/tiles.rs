@@ -684,7 +684,7 @@ fn fit_tile(
     let fit = job
         .params
         .fit
-        .then(|| job.plan.noise_voxels.unwrap_or(0.0) * h);
+        .then(|| job.plan.fit_noise_voxels.unwrap_or(0.0) * h);
     // The tile meshes' frame: offsets from the cube's corner (see `to_local`).
     let geom = GridGeom {
         origin: [0.0; 3],

@@ -128,22 +128,35 @@ impl RunIdentity {
         let options = [
             ("command", "reconstruct".to_string()),
             ("--depth", params.depth.to_string()),
-            // The measured width's rules are part of it: a run before the sparse floor
-            // (`recon::screen::sparse_floor_voxels`) solved sparse samples otherwise.
+            // The measured width's and weight's rules are part of it: a run before the sparse
+            // floor (`recon::screen::sparse_floor_voxels`) solved sparse samples otherwise,
+            // and one before the noise of close pairs (`NoiseStats::pair_sigma_voxels`)
+            // weighed and smoothed noisy relief otherwise (its coarse checkpoint is of an
+            // older format too).
             (
                 "--smooth",
                 match params.smoothing {
-                    Smoothing::Measured => {
-                        format!("measured, at least {SPARSE_SPACINGS} of the samples' spacing")
-                    }
+                    Smoothing::Measured => format!(
+                        "measured, narrowed by the noise's share of the quadrics' residual, \
+                         at least {SPARSE_SPACINGS} of the samples' spacing"
+                    ),
                     fixed => fixed.to_string(),
                 },
             ),
-            ("--point-weight", params.point_weight.to_string()),
+            (
+                "--point-weight",
+                format!("{}, noise from close pairs", params.point_weight),
+            ),
             ("--error", params.error.to_string()),
             ("--min-points", params.min_points.to_string()),
             ("--trim", params.trim.to_string()),
-            ("--no-fit", (!params.fit).to_string()),
+            (
+                "--no-fit",
+                match params.fit {
+                    true => "false, none beyond a third of a voxel of noise".to_string(),
+                    false => "true".to_string(),
+                },
+            ),
             (
                 "--gpu-solve",
                 crate::recon::gpu_solve::device_identity(params.gpu_solve)?,

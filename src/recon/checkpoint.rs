@@ -1,5 +1,5 @@
-//! The work directory's checkpoint formats: the coarse pass's results (`SFCOARS1`), a split
-//! run's chunks of the coarse pass's parts (`SFDPART1`, `SFSPART1`), a leaf's detail
+//! The work directory's checkpoint formats: the coarse pass's results (`SFCOARS2`), a split
+//! run's chunks of the coarse pass's parts (`SFDPART1`, `SFSPART2`), a leaf's detail
 //! (`SFLEAF03`) and a tile's mesh (`SFTILE07`, positions relative to the cube's lower
 //! corner), all zstd-compressed little-endian records written atomically, so that a killed
 //! run leaves each file whole or absent and a resumed run reuses what it finds.
@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 use super::density::DensityBox;
 use super::fft_solve::SplatBox;
 use super::leaf::LeafDetail;
-use super::screen::{JetStats, NoiseStats, SCREEN_PART_ENTRY_BYTES, ScreenPart};
+use super::screen::{JetStats, NoiseStats, PairStats, SCREEN_PART_ENTRY_BYTES, ScreenPart};
 use crate::error::{Error, IoContext, Result};
 use crate::io::atomic::{self, Durability};
 use crate::io::le::{LeReader, LeWriter};
@@ -305,7 +305,7 @@ pub fn read_tile(path: &Path) -> Result<TileMesh> {
 /// then four arrays each after its length (u64): the coarse solution (f32), the sampling
 /// density's counts (u32), the support's bits (u64) and the occupied leaf cells' keys (u64);
 /// then the CRC-32 of all that.
-const COARSE_MAGIC: &[u8; 8] = b"SFCOARS1";
+const COARSE_MAGIC: &[u8; 8] = b"SFCOARS2";
 
 /// The coarse pass's results, as a checkpoint holds them: the grids borrowed when written,
 /// owned when read back.
@@ -353,6 +353,9 @@ pub fn write_coarse(path: &Path, c: &CoarseCheckpoint) -> Result<()> {
         put(&j.sum_sq.to_le_bytes())?;
         put(&j.dof.to_le_bytes())?;
         put(&j.fits.to_le_bytes())?;
+    }
+    for x in c.noise.pairs.xs.iter().chain(&c.noise.pairs.xy) {
+        put(&x.to_le_bytes())?;
     }
     put(&(c.field.len() as u64).to_le_bytes())?;
     for v in c.field.iter() {
@@ -418,7 +421,7 @@ pub fn read_coarse(path: &Path) -> Result<Option<CoarseCheckpoint<'static>>> {
 
 /// A split run's share of the coarse pass for a chunk of store cells, one of two kinds:
 /// the cells' density parts (`SFDPART1`, [`write_density_parts`]) or their splats
-/// (`SFSPART1`, [`write_splat_parts`]), each in the leaf checkpoints' directory `dir`.
+/// (`SFSPART2`, [`write_splat_parts`]), each in the leaf checkpoints' directory `dir`.
 pub fn coarse_part_path(dir: &Path, kind: CoarsePartKind, chunk: usize) -> PathBuf {
     dir.join(format!("coarse-{}-{chunk:06}.zst", kind.name()))
 }
@@ -476,12 +479,12 @@ impl CellSplat {
 /// each axis) and the counts (u32); then the CRC-32 of all that; zstd-compressed.
 const DENSITY_PARTS_MAGIC: &[u8; 8] = b"SFDPART1";
 
-/// `SFSPART1`: the cell count (u64), then per cell ([`CellSplat`]): the splat's `lo` (i64 as
+/// `SFSPART2`: the cell count (u64), then per cell ([`CellSplat`]): the splat's `lo` (i64 as
 /// u64) and `dims` (u64) per axis and its values (3 f32 a node); the screening's entry count
 /// (u64) and entries (key u64, the offsets' sums 3 f64, count u64); the noise statistics (as
-/// in `SFCOARS1`); the moments' 10 sums (f64); the marks' and the leaves' counts (u64) and
+/// in `SFCOARS2`); the moments' 10 sums (f64); the marks' and the leaves' counts (u64) and
 /// values (u64); then the CRC-32; zstd-compressed.
-const SPLAT_PARTS_MAGIC: &[u8; 8] = b"SFSPART1";
+const SPLAT_PARTS_MAGIC: &[u8; 8] = b"SFSPART2";
 
 /// Write the density parts of a chunk's cells to `path`.
 pub fn write_density_parts(path: &Path, parts: &[DensityBox]) -> Result<()> {
@@ -600,7 +603,7 @@ pub fn read_splat_parts(path: &Path) -> Result<Vec<CellSplat>> {
     })
 }
 
-/// The noise statistics as `SFCOARS1` and `SFSPART1` hold them.
+/// The noise statistics as `SFCOARS2` and `SFSPART2` hold them.
 fn put_noise(w: &mut LeWriter, n: &NoiseStats) {
     w.f64(n.sum_sq);
     w.u64(n.dof);
@@ -608,6 +611,9 @@ fn put_noise(w: &mut LeWriter, n: &NoiseStats) {
         w.f64(j.sum_sq);
         w.u64(j.dof);
         w.u64(j.fits);
+    }
+    for x in n.pairs.xs.iter().chain(&n.pairs.xy) {
+        w.f64(*x);
     }
 }
 
@@ -617,11 +623,15 @@ fn get_noise(r: &mut LeReader) -> Option<NoiseStats> {
         sum_sq: r.f64()?,
         dof: r.u64()?,
         jets: [JetStats::default(); 2],
+        pairs: PairStats::default(),
     };
     for j in &mut noise.jets {
         j.sum_sq = r.f64()?;
         j.dof = r.u64()?;
         j.fits = r.u64()?;
+    }
+    for x in noise.pairs.xs.iter_mut().chain(&mut noise.pairs.xy) {
+        *x = r.f64()?;
     }
     Some(noise)
 }
@@ -661,6 +671,10 @@ mod tests {
                         fits: 2,
                     },
                 ],
+                pairs: PairStats {
+                    xs: [1500.0, 300.5, 90.25],
+                    xy: [700.0, 150.125],
+                },
             },
             field: Cow::Borrowed(&[1.0, -2.5, f32::MIN_POSITIVE]),
             density: Cow::Borrowed(&[0, 256, 77]),
@@ -674,7 +688,7 @@ mod tests {
         let z = std::fs::read(&path).unwrap();
         let raw = zstd::stream::decode_all(&z[..]).unwrap();
         let mut flipped = raw.clone();
-        flipped[8 + 4 + 8 + 16 + 48 + 8 + 12 + 8] ^= 1;
+        flipped[8 + 4 + 8 + 16 + 48 + 40 + 8 + 12 + 8] ^= 1;
         for cut in [&raw[..raw.len() - 3], &flipped[..], &b"SFLEAF03xxxx"[..]] {
             std::fs::write(&path, zstd::bulk::compress(cut, 1).unwrap()).unwrap();
             let e = read_coarse(&path).unwrap_err().to_string();
@@ -711,6 +725,10 @@ mod tests {
                     dof: 6,
                     fits: 1,
                 }; 2],
+                pairs: PairStats {
+                    xs: [2.0, 0.5, 0.125],
+                    xy: [1.0, 0.25],
+                },
             },
             moments: std::array::from_fn(|i| i as f64 * 0.5 - 1.0),
             marks: vec![3, 8, 1 << 40],

@@ -161,6 +161,11 @@ pub struct Plan {
     /// two samples).
     #[serde(default)]
     pub noise_voxels: Option<f64>,
+    /// The noise the vertex fit allows for, in fine voxels
+    /// ([`crate::recon::screen::NoiseStats::fit_noise_voxels`]; `None` before the coarse pass,
+    /// or where nothing was measured).
+    #[serde(default)]
+    pub fit_noise_voxels: Option<f64>,
     /// Samples' normals are weighed by their confidence (`--confidence`).
     #[serde(default)]
     pub confidence: bool,
@@ -200,6 +205,7 @@ impl Plan {
             coarse_sigma_vox: sigma_vox,
             point_weight,
             noise_voxels: None,
+            fit_noise_voxels: None,
             confidence: false,
         }
     }

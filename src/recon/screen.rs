@@ -49,15 +49,10 @@
 //!
 //!   (PoissonRecon, screened with 4, at σ = 1.6: 1.0·10⁻³ in 2 pieces.) So the weight is
 //!   kept up to [`NOISE_LIMIT_VOXELS`] and falls as the precision `1/σ²` beyond:
-//!   `α = 4 · min(1, (σ_lim/σ_jet)²)`, with σ_jet the spread about local quadric fits
-//!   ([`NoiseStats::jet_sigma_voxels`]), which reads noise beyond a voxel. This is the
+//!   `α = 4 · min(1, (σ_lim/σ)²)`, with σ the noise read between close samples
+//!   ([`NoiseStats::noise_voxels`], below), which reads noise beyond a voxel. This is the
 //!   default (`--point-weight standard`); every sphere above is then one piece (σ = 1.0:
 //!   α = 3.1, 6.1·10⁻⁴; 1.2: 2.0, 7.3·10⁻⁴; 1.6: 1.2, 7.0·10⁻⁴; 2.4: 0.66, 8.4·10⁻⁴).
-//!   Its cost: a relief of short wavelength under noise of 0.8 voxel wants α = 4 and the
-//!   quadrics take part of it for noise. At 1% amplitude and 8 voxels' wavelength the relief
-//!   reads 1.5 and gets α = 1.25 (mean distance 1.54·10⁻³ against 1.35·10⁻³ at 4 and
-//!   PoissonRecon's 1.12·10⁻³); at 12 voxels it reads 1.06 (α = 2.6: 8.7·10⁻⁴ against
-//!   8.6·10⁻⁴ at 4); from 18 voxels on it reads the noise (0.83) and keeps 4.
 //! - *Precise samples* can take more than 4: on a 1M-point sphere carrying a relief of 1%
 //!   amplitude at depth 9, α = 32 brings a relief of 8 voxels' wavelength from 9.7·10⁻⁴ to
 //!   5.0·10⁻⁴ (no vertex fit), while with noise of 0.23 voxel it prints the noise into the
@@ -70,12 +65,43 @@
 //!   the spread within a voxel takes structure for precision (airborne LiDAR's vegetation
 //!   returns read 0.09 voxel and took α = 20, a rougher terrain than at 4).
 //!
-//! Both are one number per run, from every point in a fixed order: the coarse and the leaf
+//! **Telling relief from noise.** Three figures are measured, each blind somewhere. The
+//! spread within fine voxels cannot exceed a voxel's own (`1/√12`). The residual about
+//! local quadrics on discs of 1.5 voxels reads noise beyond a voxel, but also every relief
+//! a quadric cannot follow: a 1% relief of 8 voxels' wavelength, noise-free, reads 0.89
+//! voxel, and with noise of 0.8 voxel 1.52, which lowered its weight to 1.25 (1.37 times
+//! PoissonRecon's mean distance). The third reads the noise alone: for pairs of samples
+//! `i, j` on the quadrics' discs, the half squared height difference along their mean
+//! normal `m = n_i + n_j`,
+//!
+//! ```text
+//!     y_ij = ½ ((p_j − p_i)·m̂)²,   x_ij = |p_j − p_i|² − ((p_j − p_i)·m̂)²,
+//! ```
+//!
+//! against their squared distance across it. Along the mean of two normals the height
+//! difference of a smooth surface is of third order in the distance (the curvature terms
+//! of the two ends cancel), and a tilt of the normals adds `|g|² x / 2` for a slope `g`:
+//! so `E[y] = σ² + c x + O(x²)`, a line whose intercept, the variogram's nugget at zero
+//! distance, is the noise `σ²` whatever the relief. It is fitted by least squares over the
+//! pairs under [`PAIR_MAX_VOXELS`] apart, pooled over the scan ([`PairStats`]). On the
+//! relief spheres of 1M points at depth 9 (voxels; within voxels, between close samples,
+//! about quadrics): noise-free 8 voxels' wavelength 0.025, 0.00, 0.89; with noise of 0.8
+//! voxel at 8, 12, 18, 30 voxels 0.275/0.79/1.52, 0.274/0.77/1.06, 0.274/0.79/0.83,
+//! 0.274/0.81/0.81; a plain sphere with noise 0.8: 0.273/0.81/0.80, with noise 1.6:
+//! 0.286/1.58/1.56. It needs normals that follow the relief (a scan's estimated ones do
+//! where the relief is wider than their neighbourhood) and samples closer than
+//! [`PAIR_MAX_VOXELS`]; where under [`PAIR_MIN_COUNT`] pairs are found the quadrics' figure
+//! stands in. Airborne LiDAR's vegetation, returns stacked over one ground point, reads as
+//! noise here too (`autzen_trim.las` at depth 9: 0.099 within voxels, 1.10 between close
+//! samples, 2.06 about quadrics), so its weight still falls (to 2.4, where the quadrics
+//! alone gave 0.68).
+//!
+//! All are one number per run, from every point in a fixed order: the coarse and the leaf
 //! solves, and any thread count, tile size or shard, share it. Where nothing could be
 //! measured (sparse samples) α = 4. The Gaussian that smooths the normal field is chosen
-//! the same way, one width per run from the spread within voxels ([`Smoothing`]): the
-//! screening pulls the surface to the samples, the Gaussian decides how much of the
-//! normals' detail there is to pull to.
+//! the same way, one width per run from the spread within voxels and the share of the
+//! quadrics' residual that is noise ([`Smoothing`]): the screening pulls the surface to the
+//! samples, the Gaussian decides how much of the normals' detail there is to pull to.
 
 use rayon::prelude::*;
 
@@ -97,10 +123,10 @@ pub const MAX_PRECISION_GAIN: f64 = 8.0;
 /// with α = 32 (α = 4: 1.4× the mean error), 0.2 voxel with α = 8 (of 4, 8, 16, 32).
 pub const NOISE_REFERENCE_VOXELS: f64 = 0.2;
 
-/// The spread about local quadrics ([`NoiseStats::jet_sigma_voxels`]), in fine voxels,
-/// beyond which the weight falls as `1/σ²` (module docs): the relief spheres with noise of
-/// 0.8 voxel read 0.83 at 18 voxels' wavelength and keep α = 4; the plain sphere with
-/// noise of 1.0 voxel, which breaks into two pieces at α = 4, reads 0.96 and takes 3.1.
+/// The noise across the surface ([`NoiseStats::noise_voxels`]), in fine voxels, beyond
+/// which the weight falls as `1/σ²` (module docs): the relief spheres with noise of 0.8
+/// voxel read 0.77–0.81 between close samples and keep α = 4; the plain sphere with noise
+/// of 1.0 voxel breaks into two pieces at α = 4 and takes 3 or less.
 pub const NOISE_LIMIT_VOXELS: f64 = 0.85;
 
 /// The spread within fine voxels under which the samples are taken as precise whatever the
@@ -122,11 +148,11 @@ pub const PRECISE_WITHIN_VOXELS: f64 = 0.05;
 /// 0.28 (0.48), for 5.3 conjugate-gradient steps a leaf against 4.9.
 pub const PRECISE_POINT_WEIGHT: f64 = 8.0;
 
-/// The factor noise beyond [`NOISE_LIMIT_VOXELS`] lowers the weight by:
-/// `min(1, (σ_lim/σ_jet)²)`; 1 where the spread was not measured, or where the spread
-/// `within` fine voxels is under [`PRECISE_WITHIN_VOXELS`].
-pub fn noise_limit(within: Option<f64>, jet_sigma: Option<f64>) -> f64 {
-    match jet_sigma {
+/// The factor noise `sigma` ([`NoiseStats::noise_voxels`]) beyond [`NOISE_LIMIT_VOXELS`]
+/// lowers the weight by: `min(1, (σ_lim/σ)²)`; 1 where the noise was not measured, or where
+/// the spread `within` fine voxels is under [`PRECISE_WITHIN_VOXELS`].
+pub fn noise_limit(within: Option<f64>, sigma: Option<f64>) -> f64 {
+    match sigma {
         Some(s) if s > NOISE_LIMIT_VOXELS && !precise(within) => (NOISE_LIMIT_VOXELS / s).powi(2),
         _ => 1.0,
     }
@@ -172,12 +198,12 @@ impl PointWeight {
                 if precise(within) {
                     PRECISE_POINT_WEIGHT
                 } else {
-                    BASE_POINT_WEIGHT * noise_limit(within, noise.jet_sigma_voxels())
+                    BASE_POINT_WEIGHT * noise_limit(within, noise.noise_voxels())
                 }
             }
             PointWeight::Auto => {
                 auto_point_weight(noise.sigma_voxels())
-                    * noise_limit(noise.sigma_voxels(), noise.jet_sigma_voxels())
+                    * noise_limit(noise.sigma_voxels(), noise.noise_voxels())
             }
             PointWeight::Fixed(a) => a,
         }
@@ -232,19 +258,23 @@ pub const SMOOTH_PRECISE_VOXELS: f64 = 0.35;
 /// ([`NoiseStats::sigma_voxels`]), which tells precise samples from noisy ones without
 /// mistaking relief for noise: `σ = clamp(σ_w / σ_ref, 0.35, 1)` voxel with `σ_ref` =
 /// [`NOISE_REFERENCE_VOXELS`], the spread at and above which `auto` stops raising the
-/// screening weight; and one voxel wherever the quadrics' residual lowers the weight (noise
-/// beyond a voxel, or structure like LiDAR's vegetation returns, which read 0.099 within
-/// voxels but 2.06 about quadrics: 0.5 voxel gave `autzen_trim.las` at depth 9 112 pieces
+/// screening weight; and one voxel wherever the noise lowers the weight (noise beyond a
+/// voxel, or structure like LiDAR's vegetation returns, which read 0.099 within voxels but
+/// 1.10 between close samples: 0.5 voxel gave `autzen_trim.las` at depth 9 112 pieces
 /// against 61). Noise-free scans read 0.006–0.03 voxel and take 0.35; the raw bunny scans
 /// (0.14) about 0.7 (two-sided mean distance to `bun_zipper` at depth 8 1.737·10⁻⁴ against
 /// 1.722 with one voxel, from the input points 3.73·10⁻⁴ against 3.80, Open3D 1.94 and
-/// 3.55); noise of 0.8 voxel reads 0.27 and keeps 1. The noisy rows of 8
-/// and 12 voxels stay level with PoissonRecon, not ahead: their relief and their noise meet
-/// at the scale of a voxel, where local quadric fits over 20 nearest samples, quartic fits
-/// over 32 and the residuals' nugget (the halved mean squared difference of nearest
-/// samples' residuals) all read the relief as noise at 1.5–2 samples a voxel of area, so
-/// no measured figure tells them from a plain sphere with noise of 1.4 voxels, which wants
-/// the widest Gaussian.
+/// 3.55); noise of 0.8 voxel reads 0.27 and would keep 1.
+///
+/// That width is then narrowed by the share of the quadrics' squared residual that is
+/// noise ([`NoiseStats::noise_share`]: the noise read between close samples over the
+/// residual about quadrics, squared), down to 0.35 voxel. What the quadrics read beyond the
+/// noise is relief too fine for a disc of 1.5 voxels, which the one-voxel Gaussian would
+/// flatten: the noisy rows above want 0.35 at 8 voxels' wavelength (share 0.27) and 0.5 at
+/// 12 (0.52), and one voxel from 18 on (0.90 and more) and on the plain sphere (1). They now
+/// get 0.35, 0.52, 0.90 and 1 (mean distance ·10⁻⁴ with the default vertex fit, which moves
+/// nothing at that noise: 10.6, 7.9, 6.7, 5.8, plain 5.4; PoissonRecon 11.2, 8.0, 6.9, 6.7,
+/// 6.6).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Smoothing {
     /// From the measured precision: [`smoothing_voxels`].
@@ -263,10 +293,11 @@ impl Smoothing {
         match self {
             Smoothing::Measured => {
                 let within = noise.sigma_voxels();
-                let measured = if noise_limit(within, noise.jet_sigma_voxels()) < 1.0 {
+                let measured = if noise_limit(within, noise.noise_voxels()) < 1.0 {
                     SMOOTH_NOISY_VOXELS
                 } else {
-                    smoothing_voxels(within)
+                    let relief = noise.noise_share().unwrap_or(1.0);
+                    (smoothing_voxels(within) * relief).max(SMOOTH_PRECISE_VOXELS)
                 };
                 measured.max(sparse_floor_voxels(spacing))
             }
@@ -357,6 +388,59 @@ pub struct NoiseStats {
     pub dof: u64,
     /// The jet fits on the narrow and on the wide disc ([`JET_RADII_VOXELS`]).
     pub jets: [JetStats; 2],
+    /// The height differences of sample pairs on the narrow discs.
+    pub pairs: PairStats,
+}
+
+/// Pairs of samples on a jet fit's narrow disc, pooled: the least-squares sums of the
+/// half squared height difference `y = ½((p_j − p_i)·m)²` along the pair's mean normal `m`
+/// against their squared distance across it, `x` (in fine voxels), for pairs under
+/// [`PAIR_MAX_VOXELS`] apart across `m` ([`NoiseStats::pair_sigma_voxels`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct PairStats {
+    /// `[Σ1, Σx, Σx²]`.
+    pub xs: [f64; 3],
+    /// `[Σy, Σxy]`.
+    pub xy: [f64; 2],
+}
+
+/// The farthest apart across their mean normal two samples of a pair are taken, in fine
+/// voxels ([`NoiseStats::pair_sigma_voxels`]).
+pub const PAIR_MAX_VOXELS: f64 = 0.75;
+
+/// The most samples of one disc whose pairs are taken: beyond, every so many (a dense scan
+/// still leaves some 18 a voxel of area on the disc).
+pub const PAIR_MAX_SAMPLES: usize = 128;
+
+/// Fewest pairs [`NoiseStats::pair_sigma_voxels`] reads.
+pub const PAIR_MIN_COUNT: f64 = 1000.0;
+
+impl PairStats {
+    fn add_pair(&mut self, x: f64, y: f64) {
+        self.xs[0] += 1.0;
+        self.xs[1] += x;
+        self.xs[2] += x * x;
+        self.xy[0] += y;
+        self.xy[1] += x * y;
+    }
+
+    fn add(&mut self, other: PairStats) {
+        for k in 0..3 {
+            self.xs[k] += other.xs[k];
+        }
+        for k in 0..2 {
+            self.xy[k] += other.xy[k];
+        }
+    }
+
+    /// The intercept of the least-squares line `y = s² + c x`, or `None` under
+    /// [`PAIR_MIN_COUNT`] pairs or where they all lie equally far apart.
+    fn nugget(&self) -> Option<f64> {
+        let [n, sx, sxx] = self.xs;
+        let [sy, sxy] = self.xy;
+        let det = n * sxx - sx * sx;
+        (n >= PAIR_MIN_COUNT && det > 1e-12 * n * sxx).then(|| (sxx * sy - sx * sxy) / det)
+    }
 }
 
 /// Jet fits pooled: their residuals, degrees of freedom and number.
@@ -484,6 +568,7 @@ impl NoiseStats {
             }
             // Normal equations of w = a + b u + c v + d u² + e uv + f v², on each disc.
             let mut fits = [Jet::default(); 2];
+            let mut near: Vec<([f64; 3], [f64; 3])> = Vec::new();
             for x in lo[0]..=hi[0] {
                 for y in lo[1]..=hi[1] {
                     let (first, last) = (voxel_key([x, y, lo[2]]), voxel_key([x, y, hi[2]]));
@@ -505,6 +590,32 @@ impl NoiseStats {
                                 fit.add(u, v, w);
                             }
                         }
+                        if u * u + v * v <= JET_RADII_VOXELS[0] * JET_RADII_VOXELS[0] {
+                            let m = nrm[i as usize].map(f64::from);
+                            let l = dot(m, m).sqrt();
+                            near.push((d, m.map(|x| x / l)));
+                        }
+                    }
+                }
+            }
+            // Every so many samples of a dense disc, so that a fit costs at most
+            // PAIR_MAX_SAMPLES² / 2 pairs.
+            let near: Vec<_> = near
+                .iter()
+                .step_by(near.len().div_ceil(PAIR_MAX_SAMPLES).max(1))
+                .collect();
+            for (i, a) in near.iter().enumerate() {
+                for b in &near[i + 1..] {
+                    let m = [0, 1, 2].map(|k| a.1[k] + b.1[k]);
+                    let l2 = dot(m, m);
+                    if l2 <= 0.0 {
+                        continue;
+                    }
+                    let e = [0, 1, 2].map(|k| b.0[k] - a.0[k]);
+                    let h2 = dot(e, m).powi(2) / l2;
+                    let x = dot(e, e) - h2;
+                    if x <= PAIR_MAX_VOXELS * PAIR_MAX_VOXELS {
+                        self.pairs.add_pair(x, 0.5 * h2);
                     }
                 }
             }
@@ -527,11 +638,45 @@ impl NoiseStats {
         for (a, b) in self.jets.iter_mut().zip(other.jets) {
             a.add(b);
         }
+        self.pairs.add(other.pairs);
     }
 
     /// The spread `σ` in fine voxels, or `None` where no voxel held two samples.
     pub fn sigma_voxels(&self) -> Option<f64> {
         (self.dof > 0).then(|| (self.sum_sq / self.dof as f64).sqrt())
+    }
+
+    /// The samples' noise in fine voxels read from pairs of close samples: the nugget of
+    /// their height differences along their mean normal (`½E[Δh²]` extrapolated to pairs no
+    /// distance apart, [`PairStats`]), `None` where too few pairs were found.
+    pub fn pair_sigma_voxels(&self) -> Option<f64> {
+        self.pairs.nugget().map(|s2| s2.max(0.0).sqrt())
+    }
+
+    /// The noise the vertex fit allows for, in fine voxels
+    /// ([`crate::surface::fit`]): the spread within fine voxels for precise samples (under
+    /// [`PRECISE_WITHIN_VOXELS`]), else the larger of it and [`Self::pair_sigma_voxels`]
+    /// (the spread within voxels cannot exceed `1/√12` of one); `None` where no fine voxel
+    /// held two samples (the fit then takes the samples as precise).
+    pub fn fit_noise_voxels(&self) -> Option<f64> {
+        let within = self.sigma_voxels()?;
+        if precise(Some(within)) {
+            return Some(within);
+        }
+        Some(self.pair_sigma_voxels().map_or(within, |p| p.max(within)))
+    }
+
+    /// The samples' noise across the surface in fine voxels: [`Self::pair_sigma_voxels`],
+    /// else [`Self::jet_sigma_voxels`].
+    pub fn noise_voxels(&self) -> Option<f64> {
+        self.pair_sigma_voxels().or_else(|| self.jet_sigma_voxels())
+    }
+
+    /// The share of the quadrics' squared residual that is noise: `σ_pair²/σ_jet²` (at most
+    /// 1), `None` where either is unmeasured.
+    pub fn noise_share(&self) -> Option<f64> {
+        let (p, j) = (self.pair_sigma_voxels()?, self.jet_sigma_voxels()?);
+        (j > 0.0).then(|| (p * p / (j * j)).min(1.0))
     }
 
     /// The jet fits' residual spread in fine voxels: over the narrow discs where the run
@@ -1124,6 +1269,85 @@ mod tests {
         }
     }
 
+    /// `n` samples of the relief `z = 0.5 + a h sin(2πx/λh) sin(2πy/λh)` over a 0.5-wide
+    /// square (`λ` and `a` in voxels of `h`), with its exact normals, moved by noise of `s`
+    /// voxels along z.
+    fn relief(n: usize, a: f64, lambda: f64, s: f64, h: f64) -> (Vec<[f64; 3]>, Vec<[f32; 3]>) {
+        use rand::{Rng, SeedableRng};
+        use rand_distr::StandardNormal;
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(7);
+        let k = std::f64::consts::TAU / (lambda * h);
+        (0..n)
+            .map(|_| {
+                let (x, y): (f64, f64) = (0.5 * rng.random::<f64>(), 0.5 * rng.random::<f64>());
+                let g: f64 = rng.sample(StandardNormal);
+                let z = 0.5 + a * h * (k * x).sin() * (k * y).sin() + s * h * g;
+                let gx = a * h * k * (k * x).cos() * (k * y).sin();
+                let gy = a * h * k * (k * x).sin() * (k * y).cos();
+                let l = (1.0 + gx * gx + gy * gy).sqrt();
+                (
+                    [x, y, z],
+                    [(-gx / l) as f32, (-gy / l) as f32, (1.0 / l) as f32],
+                )
+            })
+            .unzip()
+    }
+
+    #[test]
+    fn pairs_read_the_noise_and_not_the_relief() {
+        // 40K samples on 2,500 voxels (16 a voxel) of a relief of 1.5 voxels' amplitude and
+        // 5 voxels' wavelength, tighter than a quadric on 1.5 voxels follows: the quadrics
+        // read it as noise (1.01 voxel noise-free, 1.30 and 1.79 with noise of 0.5 and 1),
+        // the pairs of close samples do not (0.00, 0.49, 1.00).
+        let h = 0.01;
+        for s in [0.0, 0.5, 1.0] {
+            let (pos, nrm) = relief(40_000, 1.5, 5.0, s, h);
+            let st = NoiseStats::of(&pos, &nrm, [0.0; 3], h);
+            let pairs = st.pair_sigma_voxels().unwrap();
+            let jet = st.jet_sigma_voxels().unwrap();
+            assert!((pairs - s).abs() <= 0.08 * s + 0.03, "{s}: pairs {pairs}");
+            assert!(jet > s + 0.2, "{s}: jet {jet}");
+            assert_eq!(st.noise_voxels(), Some(pairs));
+            let share = st.noise_share().unwrap();
+            assert!(
+                (share - (pairs / jet).powi(2)).abs() < 1e-12 && share < 0.9,
+                "{share}"
+            );
+        }
+        // On a plane the pairs and the quadrics agree.
+        let (pos, nrm) = noisy_plane(20_000, 0.8, h, 9);
+        let st = NoiseStats::of(&pos, &nrm, [0.0; 3], h);
+        let pairs = st.pair_sigma_voxels().unwrap();
+        assert!((pairs - 0.8).abs() < 0.06, "{pairs}");
+        assert!(st.noise_share().unwrap() > 0.9, "{st:?}");
+        // 64 samples a voxel of area: every fourth of a disc's 450 is paired, and they read
+        // the same noise.
+        let (pos, nrm) = noisy_plane(160_000, 0.8, h, 12);
+        let st = NoiseStats::of(&pos, &nrm, [0.0; 3], h);
+        let dense = st.pair_sigma_voxels().unwrap();
+        assert!((dense - 0.8).abs() < 0.06, "{dense}");
+        // Too few samples for the pairs: the quadrics' figure stands in.
+        let (pos, nrm) = noisy_plane(300, 0.8, h, 10);
+        let st = NoiseStats::of(&pos, &nrm, [0.0; 3], h);
+        assert_eq!(st.pair_sigma_voxels(), None);
+        assert_eq!(st.noise_voxels(), st.jet_sigma_voxels());
+    }
+
+    #[test]
+    fn the_fit_allows_for_the_pairs_noise_where_samples_are_not_precise() {
+        let h = 0.01;
+        // Noise of 0.8 voxel: the spread within voxels stops near 0.29, the pairs read it.
+        let (pos, nrm) = noisy_plane(20_000, 0.8, h, 11);
+        let st = NoiseStats::of(&pos, &nrm, [0.0; 3], h);
+        assert!(st.sigma_voxels().unwrap() < 0.3);
+        assert_eq!(st.fit_noise_voxels(), st.pair_sigma_voxels());
+        // Precise samples keep the spread within voxels (the fit's reach asks for it).
+        let (pos, nrm) = relief(40_000, 1.5, 8.0, 0.0, h);
+        let st = NoiseStats::of(&pos, &nrm, [0.0; 3], h);
+        assert!(st.sigma_voxels().unwrap() < PRECISE_WITHIN_VOXELS);
+        assert_eq!(st.fit_noise_voxels(), st.sigma_voxels());
+    }
+
     #[test]
     fn past_ten_million_points_a_share_of_the_cells_reads_the_same_noise() {
         assert_eq!(noise_cell_stride(0), 1);
@@ -1176,6 +1400,17 @@ mod tests {
         assert!(st.jet_sigma_voxels().unwrap() < 0.01, "{st:?}");
     }
 
+    /// Pairs of close samples whose nugget is `sigma²` (squared voxels), on a line of slope
+    /// 0.5 in the squared distance.
+    fn pairs_reading(sigma: f64) -> PairStats {
+        let mut p = PairStats::default();
+        for i in 0..PAIR_MIN_COUNT as usize {
+            let x = (i % 10) as f64 * 0.05;
+            p.add_pair(x, sigma * sigma + 0.5 * x);
+        }
+        p
+    }
+
     #[test]
     fn the_weight_falls_with_noise_beyond_the_limit() {
         let noise = |sigma: f64, jet: f64| NoiseStats {
@@ -1186,6 +1421,7 @@ mod tests {
                 dof: 1,
                 fits: JET_MIN_FITS,
             }; 2],
+            pairs: PairStats::default(),
         };
         let unmeasured = NoiseStats::default();
         assert_eq!(PointWeight::Standard.alpha(&unmeasured), BASE_POINT_WEIGHT);
@@ -1210,6 +1446,20 @@ mod tests {
             PRECISE_POINT_WEIGHT
         );
         assert_eq!(PointWeight::Auto.alpha(&noise(0.02, 1.7)), 32.0);
+        // Where pairs of close samples read the noise, they decide: a relief the quadrics
+        // misread (1.7) under noise of 0.8 keeps 4; noise of twice the limit, read by
+        // both, a quarter.
+        let relief = NoiseStats {
+            pairs: pairs_reading(0.8),
+            ..noise(0.28, 1.7)
+        };
+        assert!((relief.noise_voxels().unwrap() - 0.8).abs() < 1e-9);
+        assert_eq!(PointWeight::Standard.alpha(&relief), 4.0);
+        let noisy = NoiseStats {
+            pairs: pairs_reading(2.0 * NOISE_LIMIT_VOXELS),
+            ..noise(0.28, 1.7)
+        };
+        assert!((PointWeight::Standard.alpha(&noisy) - 1.0).abs() < 1e-9);
         // A given weight is the weight.
         assert_eq!(PointWeight::Fixed(4.0).alpha(&twice), 4.0);
         assert_eq!(PointWeight::Fixed(0.0).alpha(&twice), 0.0);
@@ -1250,6 +1500,29 @@ mod tests {
             ..within(sigma)
         };
         assert_eq!(Smoothing::Measured.voxels(&rough(0.099), None), 1.0);
+        // Under the limit, the width narrows by the share of the quadrics' residual that
+        // pairs of close samples read as noise: 0.8 of 1.0 (0.64), 0.8 of 2.0 (0.16, so
+        // the narrowest); all of it where the pairs read as much as the quadrics.
+        let relief = |pairs: f64| NoiseStats {
+            pairs: pairs_reading(pairs),
+            ..rough(0.28)
+        };
+        let share = |jet: f64| NoiseStats {
+            jets: [JetStats {
+                sum_sq: jet * jet,
+                dof: 1,
+                fits: JET_MIN_FITS,
+            }; 2],
+            ..relief(0.8)
+        };
+        assert!((Smoothing::Measured.voxels(&share(1.0), None) - 0.64).abs() < 1e-9);
+        assert_eq!(
+            Smoothing::Measured.voxels(&share(2.0), None),
+            SMOOTH_PRECISE_VOXELS
+        );
+        assert!((Smoothing::Measured.voxels(&share(0.7), None) - 1.0).abs() < 1e-9);
+        // Pairs reading noise beyond the limit: one voxel.
+        assert_eq!(Smoothing::Measured.voxels(&relief(1.9), None), 1.0);
         assert_eq!(
             Smoothing::Measured.voxels(&rough(0.02), None),
             SMOOTH_PRECISE_VOXELS

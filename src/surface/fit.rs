@@ -210,9 +210,9 @@ impl NearPoints {
 /// plane, shrunk by what twice the standard error of the plane's offset explains, and kept
 /// within the edge by [`edge_margin`]. Not moved (only kept within the edge) when fewer than
 /// 3 neighbours, or the nearest or the plane beyond two voxels (two of the neighbours'
-/// spacings where they lie farther apart). `noise` is
-/// the samples' measured spread across the surface (input units; 0 where unknown), the part
-/// of the residuals that does not count as a misfit (`MISFIT_SHARE`).
+/// spacings where they lie farther apart), or for `noise` of [`FIT_NOISE_LIMIT_VOXELS`] or
+/// more. `noise` is the samples' measured spread across the surface (input units; 0 where
+/// unknown), the part of the residuals that does not count as a misfit (`MISFIT_SHARE`).
 pub fn project(
     v: [f64; 3],
     axis: usize,
@@ -235,6 +235,9 @@ fn project_plane(
 ) -> ([f64; 3], Option<(Plane, f64)>) {
     let mut p = v;
     p[axis] = clamp_to_edge(v[axis], edge);
+    if noise >= FIT_NOISE_LIMIT_VOXELS * h {
+        return (p, None);
+    }
     let Some(plane) = Plane::fit(nb, h, precise(noise, h)) else {
         return (p, None);
     };
@@ -317,24 +320,36 @@ struct Plane {
     precise: bool,
 }
 
-/// The share of the residuals' spread beyond what noise explains, `√(sd² − (3σ)²)`, that
+/// The share of the residuals' spread beyond what noise explains, `√(sd² − σ²)`, that
 /// bounds how well the fit knows the offset, beside its standard error: where the plane or
 /// the jet misfits the points (a relief whose curvature radius is under the neighbourhood's
 /// radius), the error at the vertex is of the order of the residuals, not of their mean.
-/// Measured on 1M-point spheres carrying a relief of 1% amplitude at depth 9 (mean distance
-/// to the exact surface, screened with α = 32, residuals counted whole): at 8 voxels'
-/// wavelength, 6.9·10⁻⁴ with the standard error alone, 5.5·10⁻⁴ with 0.5, 5.0·10⁻⁴ with 1
-/// (the field alone: 5.0·10⁻⁴); at 18 voxels 9.3, 9.1 and 10.7·10⁻⁵; at 30 voxels 2.85,
-/// 2.87 and 3.4·10⁻⁵.
-const MISFIT_SHARE: f64 = 0.5;
+/// Measured on precise 1M-point spheres carrying a relief at depth 9 (mean distance to the
+/// exact surface ·10⁻⁴, the default screening; share 0.5 → 1, no fit in brackets): 1%
+/// amplitude at 8 voxels' wavelength 5.5 → 4.87 (4.90), at 12 voxels 2.37 → 2.63 (2.80),
+/// at 30 voxels 0.287 → 0.328 (0.77); 2% at 8 voxels 7.34 → 5.34 (5.31), which half the
+/// spread left above PoissonRecon's 6.78. Tighter relief than the neighbourhood follows
+/// is what a precise scan's detail is, so the whole spread.
+const MISFIT_SHARE: f64 = 1.0;
 
 /// Residuals within this many times the samples' measured noise `σ` are taken as noise, not
-/// misfit. The measured `σ` is the spread within one fine voxel, while a fit's 20 neighbours
-/// span several and, in a scan merged from several, carry the scans' misregistration too. On
-/// the raw bunny scans at depth 8 (σ = 0.14 voxel), against Open3D's distance to
-/// `bun_zipper`: 1.08 with 1σ, 1.00 with 2σ, 0.99 with 3σ (0.93 with no misfit bound at all,
-/// which leaves the 8-voxel relief at 6.9·10⁻⁴ instead of 5.5·10⁻⁴ with 3σ).
-const NOISE_SPAN: f64 = 3.0;
+/// misfit. `σ` read between close samples ([`FIT_NOISE_LIMIT_VOXELS`]) holds the spread of
+/// every source the fit's neighbours carry, a merged scan's misregistration too, so once.
+/// (Three times the spread within voxels, which read under it, hid a relief's misfit behind
+/// the noise: a 1% relief of 12 voxels' wavelength with noise of 0.25 voxel, 6.0·10⁻⁴ mean
+/// distance against 5.0·10⁻⁴ now and 4.8·10⁻⁴ unfitted.)
+const NOISE_SPAN: f64 = 1.0;
+
+/// Samples whose noise ([`crate::recon::screen::NoiseStats::fit_noise_voxels`]) reaches
+/// this many fine voxels move no vertex. The smoothed field has then averaged as many
+/// samples as the fit's [`FIT_NEIGHBOURS`], or more, and the fit's own error only adds to
+/// it. Measured at depth 9 (mean distance to the exact surface ·10⁻⁴, fitted → unfitted;
+/// noise in voxels as read between close samples): a 1% relief of 12 voxels' wavelength at
+/// noise 0.25: 4.98 → 4.82, 0.5: 6.24 → 5.92, 0.8: 8.23 → 7.89; of 8 voxels at 0.8: 11.3 →
+/// 10.6; a plain sphere at 0.5: 3.500 → 3.494. The raw bunny scans (0.2 voxel at depth
+/// 8) are fitted: two-sided distance to `bun_zipper` 8.70 and 4.52·10⁻⁵, unfitted 9.36 and
+/// 5.46.
+pub const FIT_NOISE_LIMIT_VOXELS: f64 = 0.35;
 
 /// The jet is kept over the plane when its three curvature terms reduce the residual by more
 /// than this F ratio, `((RSS_plane − RSS_jet)/3) / (RSS_jet/(k − 6))`. The 99th percentile of
@@ -648,7 +663,8 @@ mod tests {
         // Precise points on z = a·cos(2πx/λ)·cos(2πy/λ) with λ = 1.6 voxels across a
         // neighbourhood of 1.6 × 1.2 voxels: no quadratic follows it, and the residuals are
         // misfit. The vertex, 0.3 voxel above, then moves less than the jet's offset; where
-        // measured noise of the residuals' size explains them, it moves by nearly all of it.
+        // measured noise of the residuals' size (0.3 voxel, under the fit's noise limit)
+        // explains them, it moves by nearly all of it.
         let h = 0.01;
         let (a, lambda) = (0.004, 0.016);
         let w = std::f64::consts::TAU / lambda;
@@ -665,9 +681,23 @@ mod tests {
         let edge = [0.0, 0.01];
         let v0 = [0.0, 0.0, 0.003];
         let held = project(v0, 2, edge, &nb, h, 0.0)[2] - v0[2];
-        let free = project(v0, 2, edge, &nb, h, 0.01)[2] - v0[2];
+        let free = project(v0, 2, edge, &nb, h, 0.003)[2] - v0[2];
         assert!(free.abs() > 0.0, "{free}");
         assert!(held.abs() < 0.5 * free.abs(), "held {held}, free {free}");
+    }
+
+    #[test]
+    fn samples_noisier_than_the_fit_limit_move_no_vertex() {
+        // Precise points on z = 0, the vertex 0.3 voxel above: followed where the measured
+        // noise is under FIT_NOISE_LIMIT_VOXELS, kept (only within its edge) from it on.
+        let h = 0.01;
+        let nb = plane_points(0.0);
+        let edge = [0.0, 0.01];
+        let v0 = [0.0, 0.0, 0.003];
+        let under = project(v0, 2, edge, &nb, h, 0.9 * FIT_NOISE_LIMIT_VOXELS * h);
+        assert!(under[2] < 0.001, "{under:?}");
+        let at = project(v0, 2, edge, &nb, h, FIT_NOISE_LIMIT_VOXELS * h);
+        assert_eq!(at, v0);
     }
 
     #[test]

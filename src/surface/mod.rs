@@ -67,13 +67,17 @@
 //! solve would, Kazhdan & Hoppe, "Screened Poisson surface reconstruction", 2013). Where
 //! the model itself misfits (a relief curved more tightly than the neighbourhood's radius,
 //! which neither the plane nor the jet can follow), the error at the vertex is of the order
-//! of the residuals rather than of their mean, so `se` is at least half the residuals'
-//! spread beyond three times the samples' measured noise ([`fit`]'s `MISFIT_SHARE`,
-//! `NOISE_SPAN`; the noise is the in-voxel spread of [`crate::recon::screen::NoiseStats`]): there the screened
-//! field, already through the samples, is kept (a relief of 8 voxels' wavelength:
-//! 6.9·10⁻⁴ → 5.5·10⁻⁴), while residuals that noise explains leave the fit as it was. A vertex
-//! moves only where its nearest point is within two voxels and its plane within two voxels,
-//! so regions the coarse solution closed (holes) are left as solved.
+//! of the residuals rather than of their mean, so `se` is at least the residuals' spread
+//! beyond the samples' measured noise ([`fit`]'s `MISFIT_SHARE`, `NOISE_SPAN`; the noise is
+//! [`crate::recon::screen::NoiseStats::fit_noise_voxels`], read from pairs of close samples
+//! where they are not precise): there the screened field, already through the samples, is
+//! kept (a precise relief of 8 voxels' wavelength: 5.5·10⁻⁴ with half the spread, 4.9·10⁻⁴
+//! with all of it), while residuals that noise explains leave the fit as it was. Samples
+//! whose noise reaches a third of a voxel ([`fit`]'s `FIT_NOISE_LIMIT_VOXELS`) move no
+//! vertex: the solve's Gaussian has averaged as many of them as the fit's 20, and the fit
+//! only adds its own error. A vertex moves only where its nearest point is within two
+//! voxels and its plane within two voxels, so regions the coarse solution closed (holes)
+//! are left as solved.
 //!
 //! **Colour** ([`colour`]): the inverse-distance blend of the nearest
 //! [`colour::COLOUR_NEIGHBOURS`] points. **Neighbours** ([`point_grid`]) are exact k-nearest
