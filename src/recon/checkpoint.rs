@@ -347,16 +347,10 @@ pub fn write_coarse(path: &Path, c: &CoarseCheckpoint) -> Result<()> {
     put(COARSE_MAGIC)?;
     put(&c.iterations.to_le_bytes())?;
     put(&c.point_weight.to_le_bytes())?;
-    put(&c.noise.sum_sq.to_le_bytes())?;
-    put(&c.noise.dof.to_le_bytes())?;
-    for j in &c.noise.jets {
-        put(&j.sum_sq.to_le_bytes())?;
-        put(&j.dof.to_le_bytes())?;
-        put(&j.fits.to_le_bytes())?;
-    }
-    for x in c.noise.pairs.xs.iter().chain(&c.noise.pairs.xy) {
-        put(&x.to_le_bytes())?;
-    }
+    // The noise as `put_noise` lays it out for the split parts, so the two cannot drift.
+    let mut noise = LeWriter::default();
+    put_noise(&mut noise, &c.noise);
+    put(&noise.bytes)?;
     put(&(c.field.len() as u64).to_le_bytes())?;
     for v in c.field.iter() {
         put(&v.to_le_bytes())?;
