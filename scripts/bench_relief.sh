@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Fine relief, with and without noise: scanflow reconstruct (the default, screened with 4
-# lowered for noise beyond 0.85 voxel between close samples or 8 for precise samples, its
+# lowered for noise beyond 0.85 voxel between close samples and to the relief's share where
+# noise from 0.35 to 0.75 voxel outweighs it, or 8 for precise samples, its
 # Gaussian's width from the measured precision narrowed by the noise's share of the quadrics'
 # residual, with the vertex fit, which noise beyond a third of a voxel stops; the *.log
 # summaries give the three noise figures; --point-weight auto, also raised for

@@ -664,9 +664,11 @@ pub struct ReconstructArgs {
     /// [0, 64]; 0 solves the unscreened equation; a number is used as given, as
     /// PoissonRecon's `--pointWeight` (also accepted), with its scaling by depth. `standard`
     /// (the default) takes 4, lowered as 1/σ² where the samples' measured noise across the
-    /// surface exceeds 0.85 voxel (there 4 grows blobs out of the noise), and 8 for samples
-    /// that read precise (a spread within voxels under 0.05 voxel); `auto` raises it, up to
-    /// 32, for precise samples (fine relief, metrology).
+    /// surface exceeds 0.85 voxel (there 4 grows blobs out of the noise), lowered further to
+    /// the relief's share where noise from 0.35 to 0.75 voxel outweighs the relief (a plain
+    /// noisy surface is solved unscreened), and 8 for samples that read precise (a spread
+    /// within voxels under 0.05 voxel); `auto` raises it, up to 32, for precise samples
+    /// (fine relief, metrology).
     #[arg(long, alias = "pointWeight", default_value = "standard")]
     pub point_weight: String,
     /// Keep the vertices where marching cubes put them, instead of moving each onto the

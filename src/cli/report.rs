@@ -79,6 +79,9 @@ pub fn reconstruct(st: &ReconStats, out: &Path, total_secs: f64) {
             short(st.point_weight),
             st.leaf_iterations as f64 / st.leaves_solved as f64
         )
+    } else if st.leaves_solved > 0 && !noise.is_empty() {
+        // Where the noise outweighs the relief (`recon::screen::relief_weight`).
+        format!(", unscreened{noise}")
     } else {
         String::new()
     };

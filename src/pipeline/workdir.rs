@@ -145,7 +145,12 @@ impl RunIdentity {
             ),
             (
                 "--point-weight",
-                format!("{}, noise from close pairs", params.point_weight),
+                format!(
+                    "{}, noise from close pairs, the relief's share from {} voxel of noise to {}",
+                    params.point_weight,
+                    crate::surface::fit::FIT_NOISE_LIMIT_VOXELS,
+                    crate::recon::screen::NOISE_DOMINANT_VOXELS
+                ),
             ),
             ("--error", params.error.to_string()),
             ("--min-points", params.min_points.to_string()),
@@ -153,7 +158,10 @@ impl RunIdentity {
             (
                 "--no-fit",
                 match params.fit {
-                    true => "false, none beyond a third of a voxel of noise".to_string(),
+                    true => format!(
+                        "false, none from {} voxel of noise, noisy samples' misfit by half",
+                        crate::surface::fit::FIT_NOISE_LIMIT_VOXELS
+                    ),
                     false => "true".to_string(),
                 },
             ),

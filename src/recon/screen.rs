@@ -50,9 +50,40 @@
 //!   (PoissonRecon, screened with 4, at σ = 1.6: 1.0·10⁻³ in 2 pieces.) So the weight is
 //!   kept up to [`NOISE_LIMIT_VOXELS`] and falls as the precision `1/σ²` beyond:
 //!   `α = 4 · min(1, (σ_lim/σ)²)`, with σ the noise read between close samples
-//!   ([`NoiseStats::noise_voxels`], below), which reads noise beyond a voxel. This is the
-//!   default (`--point-weight standard`); every sphere above is then one piece (σ = 1.0:
-//!   α = 3.1, 6.1·10⁻⁴; 1.2: 2.0, 7.3·10⁻⁴; 1.6: 1.2, 7.0·10⁻⁴; 2.4: 0.66, 8.4·10⁻⁴).
+//!   ([`NoiseStats::noise_voxels`], below), which reads noise beyond a voxel. With this
+//!   limit alone every sphere above is one piece (σ = 1.0: α = 3.1, 6.1·10⁻⁴; 1.2: 2.0,
+//!   7.3·10⁻⁴; 1.6: 1.2, 7.0·10⁻⁴; 2.4: 0.66, 8.4·10⁻⁴); the default
+//!   (`--point-weight standard`) also takes the next rule, which solves these plain spheres
+//!   unscreened (σ = 1.6: one piece, 2.6·10⁻⁴).
+//! - *Noise that outweighs the relief* takes the weight down further, to the relief's share.
+//!   Screening pulls the surface through the samples' noise as much as through their relief,
+//!   and where the quadrics read no more than the noise (a plain noisy surface, or relief
+//!   of long wavelength) the smoothed normals miss nothing that the pull could restore: it
+//!   only prints the noise. So `α` is multiplied by `1 − w·s` ([`relief_weight`]), with
+//!   `s = σ_pair²/σ_jet²` the noise's share of the quadrics' residual ([`NoiseStats::noise_share`],
+//!   below) and `w` rising from 0 at the noise where the vertex fit stops
+//!   ([`crate::surface::fit::FIT_NOISE_LIMIT_VOXELS`], 0.35 voxel) to 1 at
+//!   [`NOISE_DOMINANT_VOXELS`]. On 1M-point spheres at depth 9 with noise of 0.8 voxel
+//!   (mean two-sided distance to the exact surface ·10⁻⁴; fixed α, then the rule's α and
+//!   its result; PoissonRecon):
+//!
+//!   | relief (amplitude, wavelength) | `s` | α = 0 | 1 | 2 | 4 | rule | PoissonRecon |
+//!   |---|---|---|---|---|---|---|---|
+//!   | 1%, 8 voxels | 0.27 | 13.4 | 12.1 | 11.4 | 10.6 | 2.91: 10.9 | 11.2 |
+//!   | 2%, 12 voxels | 0.18 | 11.4 | 9.42 | 8.83 | 8.97 | 3.27: 8.84 | 9.08 |
+//!   | 1%, 12 voxels | 0.52 | 8.87 | 7.97 | 7.68 | 7.90 | 1.92: 7.68 | 8.00 |
+//!   | 2%, 18 voxels | 0.47 | 7.18 | 6.99 | 7.17 | 7.86 | 2.10: 7.21 | 7.54 |
+//!   | 0.5%, 8 voxels | 0.66 | 8.89 | 8.64 | 8.54 | 8.49 | 1.36: 8.58 | 8.72 |
+//!   | 0.5%, 30 voxels | 0.99 | 2.63 | | | 5.52 | 0.02: 2.66 | 6.62 |
+//!   | none | 1 | | | | 5.4 | 0: 2.28 | 6.6 |
+//!
+//!   Short relief keeps most of the weight, long relief and plain noise lose it all. The
+//!   samples of noise under the fit's limit keep their weight (the raw bunny scans, 0.215
+//!   voxel); `autzen_trim.las` (1.10 voxel, `s` 0.29) goes from 2.39 to 1.70, a smoother
+//!   ground (area-weighted mean |n_z| 0.9498 against 0.9445) in 62 pieces against 47. A
+//!   relief that folds within a voxel (2% amplitude at 8 voxels' wavelength) reads as noise
+//!   between close samples (1.28 voxel) and so loses weight it needs: 2.2·10⁻³ against
+//!   PoissonRecon's 1.3·10⁻³.
 //! - *Precise samples* can take more than 4: on a 1M-point sphere carrying a relief of 1%
 //!   amplitude at depth 9, α = 32 brings a relief of 8 voxels' wavelength from 9.7·10⁻⁴ to
 //!   5.0·10⁻⁴ (no vertex fit), while with noise of 0.23 voxel it prints the noise into the
@@ -158,6 +189,28 @@ pub fn noise_limit(within: Option<f64>, sigma: Option<f64>) -> f64 {
     }
 }
 
+/// The noise across the surface ([`NoiseStats::noise_voxels`]), in fine voxels, from which
+/// [`relief_weight`] takes the screening weight down to the relief's share in full; it
+/// begins at [`crate::surface::fit::FIT_NOISE_LIMIT_VOXELS`], the noise at which the vertex
+/// fit stops. Measured (module docs): with 0.85, the plain sphere with noise of 0.8 voxel
+/// (α = 0.33) came out at 2.8·10⁻⁴ against 2.3 (α = 0), the relief of 30 voxels'
+/// wavelength at 0.5% amplitude at 3.2·10⁻⁴ against 2.7.
+pub const NOISE_DOMINANT_VOXELS: f64 = 0.75;
+
+/// The factor by which noise that outweighs the relief lowers the screening weight (module
+/// docs): `1 − w·s`, with `s` the noise's share of the quadrics' residual
+/// ([`NoiseStats::noise_share`]) and `w` rising linearly from 0 at
+/// [`crate::surface::fit::FIT_NOISE_LIMIT_VOXELS`] of noise ([`NoiseStats::noise_voxels`]) to
+/// 1 at [`NOISE_DOMINANT_VOXELS`]; 1 where either figure is unmeasured.
+pub fn relief_weight(noise: &NoiseStats) -> f64 {
+    let (Some(sigma), Some(share)) = (noise.noise_voxels(), noise.noise_share()) else {
+        return 1.0;
+    };
+    let from = crate::surface::fit::FIT_NOISE_LIMIT_VOXELS;
+    let w = ((sigma - from) / (NOISE_DOMINANT_VOXELS - from)).clamp(0.0, 1.0);
+    1.0 - w * share
+}
+
 /// Whether samples whose spread `within` fine voxels was measured are precise (under
 /// [`PRECISE_WITHIN_VOXELS`]).
 fn precise(within: Option<f64>) -> bool {
@@ -179,10 +232,11 @@ pub fn auto_point_weight(sigma: Option<f64>) -> f64 {
 /// for precise samples), or a fixed α.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum PointWeight {
-    /// [`BASE_POINT_WEIGHT`] times [`noise_limit`]; [`PRECISE_POINT_WEIGHT`] for precise
+    /// [`BASE_POINT_WEIGHT`] times [`noise_limit`] and [`relief_weight`];
+    /// [`PRECISE_POINT_WEIGHT`] for precise
     /// samples (under [`PRECISE_WITHIN_VOXELS`] within fine voxels).
     Standard,
-    /// [`auto_point_weight`] times [`noise_limit`].
+    /// [`auto_point_weight`] times [`noise_limit`] and [`relief_weight`].
     Auto,
     /// The given α (0: the unscreened solve), whatever the noise.
     Fixed(f64),
@@ -198,12 +252,15 @@ impl PointWeight {
                 if precise(within) {
                     PRECISE_POINT_WEIGHT
                 } else {
-                    BASE_POINT_WEIGHT * noise_limit(within, noise.noise_voxels())
+                    BASE_POINT_WEIGHT
+                        * noise_limit(within, noise.noise_voxels())
+                        * relief_weight(noise)
                 }
             }
             PointWeight::Auto => {
                 auto_point_weight(noise.sigma_voxels())
                     * noise_limit(noise.sigma_voxels(), noise.noise_voxels())
+                    * relief_weight(noise)
             }
             PointWeight::Fixed(a) => a,
         }
@@ -273,8 +330,9 @@ pub const SMOOTH_PRECISE_VOXELS: f64 = 0.35;
 /// flatten: the noisy rows above want 0.35 at 8 voxels' wavelength (share 0.27) and 0.5 at
 /// 12 (0.52), and one voxel from 18 on (0.90 and more) and on the plain sphere (1). They now
 /// get 0.35, 0.52, 0.90 and 1 (mean distance ·10⁻⁴ with the default vertex fit, which moves
-/// nothing at that noise: 10.6, 7.9, 6.7, 5.8, plain 5.4; PoissonRecon 11.2, 8.0, 6.9, 6.7,
-/// 6.6).
+/// nothing at that noise, at α = 4: 10.6, 7.9, 6.7, 5.8, plain 5.4; with the weight lowered
+/// to the relief's share ([`relief_weight`]): 10.9, 7.7, 6.0, 3.4, plain 2.3; PoissonRecon
+/// 11.2, 8.0, 6.9, 6.7, 6.6).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Smoothing {
     /// From the measured precision: [`smoothing_voxels`].
@@ -1447,22 +1505,71 @@ mod tests {
         );
         assert_eq!(PointWeight::Auto.alpha(&noise(0.02, 1.7)), 32.0);
         // Where pairs of close samples read the noise, they decide: a relief the quadrics
-        // misread (1.7) under noise of 0.8 keeps 4; noise of twice the limit, read by
-        // both, a quarter.
+        // misread (1.7) under noise of 0.8 is not lowered as noise beyond the limit, only
+        // to the relief's share of their residual ([`relief_weight`]); noise of twice the
+        // limit, read by both, is all the residual, and is solved unscreened.
         let relief = NoiseStats {
             pairs: pairs_reading(0.8),
             ..noise(0.28, 1.7)
         };
         assert!((relief.noise_voxels().unwrap() - 0.8).abs() < 1e-9);
-        assert_eq!(PointWeight::Standard.alpha(&relief), 4.0);
+        let share = 0.8f64.powi(2) / 1.7f64.powi(2);
+        assert!((PointWeight::Standard.alpha(&relief) - 4.0 * (1.0 - share)).abs() < 1e-9);
         let noisy = NoiseStats {
             pairs: pairs_reading(2.0 * NOISE_LIMIT_VOXELS),
             ..noise(0.28, 1.7)
         };
-        assert!((PointWeight::Standard.alpha(&noisy) - 1.0).abs() < 1e-9);
+        assert!(PointWeight::Standard.alpha(&noisy).abs() < 1e-9);
         // A given weight is the weight.
         assert_eq!(PointWeight::Fixed(4.0).alpha(&twice), 4.0);
         assert_eq!(PointWeight::Fixed(0.0).alpha(&twice), 0.0);
+    }
+
+    #[test]
+    fn noise_that_outweighs_the_relief_takes_the_weight_down_to_the_reliefs_share() {
+        // Noise `pair` between close samples, `jet` about quadrics, 0.28 within voxels.
+        let read = |pair: f64, jet: f64| NoiseStats {
+            sum_sq: 0.28 * 0.28,
+            dof: 1,
+            jets: [JetStats {
+                sum_sq: jet * jet,
+                dof: 1,
+                fits: JET_MIN_FITS,
+            }; 2],
+            pairs: pairs_reading(pair),
+        };
+        let limit = crate::surface::fit::FIT_NOISE_LIMIT_VOXELS;
+        // Up to the vertex fit's limit, the weight stays whatever the share.
+        assert_eq!(relief_weight(&read(0.9 * limit, 0.9 * limit)), 1.0);
+        assert!((PointWeight::Standard.alpha(&read(limit, limit)) - 4.0).abs() < 1e-9);
+        // From the dominant noise on, all of the noise's share comes off: a plain noisy
+        // surface (the pairs read the quadrics' residual) is solved unscreened, a relief
+        // the quadrics miss keeps its part.
+        let d = NOISE_DOMINANT_VOXELS;
+        assert!(relief_weight(&read(d, d)).abs() < 1e-9);
+        assert!((relief_weight(&read(d, 2.0 * d)) - 0.75).abs() < 1e-9);
+        // In between, a linear share of it: halfway, half.
+        let mid = 0.5 * (limit + d);
+        assert!((relief_weight(&read(mid, mid)) - 0.5).abs() < 1e-9);
+        assert!((PointWeight::Auto.alpha(&read(mid, mid)) - 2.0).abs() < 1e-9);
+        // More relief, more weight: the weight grows as the quadrics read more.
+        let w: Vec<f64> = [0.8, 1.0, 1.5, 3.0]
+            .iter()
+            .map(|&j| PointWeight::Standard.alpha(&read(0.8, j)))
+            .collect();
+        assert!(w.windows(2).all(|p| p[0] < p[1]), "{w:?}");
+        // Unmeasured pairs or quadrics leave it; precise samples and a given weight ignore it.
+        let no_pairs = NoiseStats {
+            pairs: PairStats::default(),
+            ..read(d, d)
+        };
+        assert_eq!(relief_weight(&no_pairs), 1.0);
+        let precise = NoiseStats {
+            sum_sq: 0.01 * 0.01,
+            ..read(d, d)
+        };
+        assert_eq!(PointWeight::Standard.alpha(&precise), PRECISE_POINT_WEIGHT);
+        assert_eq!(PointWeight::Fixed(4.0).alpha(&read(d, d)), 4.0);
     }
 
     #[test]
