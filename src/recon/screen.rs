@@ -1469,18 +1469,24 @@ mod tests {
         p
     }
 
-    #[test]
-    fn the_weight_falls_with_noise_beyond_the_limit() {
-        let noise = |sigma: f64, jet: f64| NoiseStats {
-            sum_sq: sigma * sigma,
+    /// Statistics reading `within` fine voxels, `jet` about quadrics (narrow and wide fits
+    /// alike) and `pairs` between close samples.
+    fn reading(within: f64, jet: f64, pairs: PairStats) -> NoiseStats {
+        NoiseStats {
+            sum_sq: within * within,
             dof: 1,
             jets: [JetStats {
                 sum_sq: jet * jet,
                 dof: 1,
                 fits: JET_MIN_FITS,
             }; 2],
-            pairs: PairStats::default(),
-        };
+            pairs,
+        }
+    }
+
+    #[test]
+    fn the_weight_falls_with_noise_beyond_the_limit() {
+        let noise = |sigma: f64, jet: f64| reading(sigma, jet, PairStats::default());
         let unmeasured = NoiseStats::default();
         assert_eq!(PointWeight::Standard.alpha(&unmeasured), BASE_POINT_WEIGHT);
         assert_eq!(PointWeight::Auto.alpha(&unmeasured), BASE_POINT_WEIGHT);
@@ -1528,16 +1534,7 @@ mod tests {
     #[test]
     fn noise_that_outweighs_the_relief_takes_the_weight_down_to_the_reliefs_share() {
         // Noise `pair` between close samples, `jet` about quadrics, 0.28 within voxels.
-        let read = |pair: f64, jet: f64| NoiseStats {
-            sum_sq: 0.28 * 0.28,
-            dof: 1,
-            jets: [JetStats {
-                sum_sq: jet * jet,
-                dof: 1,
-                fits: JET_MIN_FITS,
-            }; 2],
-            pairs: pairs_reading(pair),
-        };
+        let read = |pair: f64, jet: f64| reading(0.28, jet, pairs_reading(pair));
         let limit = crate::surface::fit::FIT_NOISE_LIMIT_VOXELS;
         // Up to the vertex fit's limit, the weight stays whatever the share.
         assert_eq!(relief_weight(&read(0.9 * limit, 0.9 * limit)), 1.0);

@@ -679,6 +679,23 @@ mod tests {
         assert!(v[2] > 0.0015 * 0.5, "{v:?}");
     }
 
+    /// [`plane_points`] on `z = a·cos(2πx/λ)·cos(2πy/λ)`, `a` 0.4 and `λ` 1.6 voxels of 0.01,
+    /// nearest the origin first: a relief no quadratic over them follows.
+    fn tight_relief() -> Vec<Neighbour> {
+        let (a, lambda) = (0.004, 0.016);
+        let w = std::f64::consts::TAU / lambda;
+        let mut nb: Vec<Neighbour> = plane_points(0.0)
+            .into_iter()
+            .map(|x| {
+                let (px, py) = (x.1[0], x.1[1]);
+                let z = a * (w * px).cos() * (w * py).cos();
+                (px * px + py * py + z * z, [px, py, z], x.2, x.3)
+            })
+            .collect();
+        nb.sort_by(|p, q| p.0.total_cmp(&q.0));
+        nb
+    }
+
     #[test]
     fn a_relief_the_jet_cannot_follow_holds_the_vertex_unless_noise_explains_it() {
         // Precise points on z = a·cos(2πx/λ)·cos(2πy/λ) with λ = 1.6 voxels across a
@@ -687,18 +704,7 @@ mod tests {
         // measured noise of the residuals' size (0.3 voxel, under the fit's noise limit)
         // explains them, it moves by nearly all of it.
         let h = 0.01;
-        let (a, lambda) = (0.004, 0.016);
-        let w = std::f64::consts::TAU / lambda;
-        let nb: Vec<Neighbour> = plane_points(0.0)
-            .into_iter()
-            .map(|x| {
-                let (px, py) = (x.1[0], x.1[1]);
-                let z = a * (w * px).cos() * (w * py).cos();
-                (px * px + py * py + z * z, [px, py, z], x.2, x.3)
-            })
-            .collect();
-        let mut nb = nb;
-        nb.sort_by(|p, q| p.0.total_cmp(&q.0));
+        let nb = tight_relief();
         let edge = [0.0, 0.01];
         let v0 = [0.0, 0.0, 0.003];
         let held = project(v0, 2, edge, &nb, h, 0.0)[2] - v0[2];
@@ -713,17 +719,7 @@ mod tests {
         // read as precise (0.04 voxel, under PRECISE_WITHIN_VOXELS) all of the excess holds
         // the vertex, read as noisy (0.06 voxel) half of it does, so the vertex moves more.
         let h = 0.01;
-        let (a, lambda) = (0.004, 0.016);
-        let w = std::f64::consts::TAU / lambda;
-        let mut nb: Vec<Neighbour> = plane_points(0.0)
-            .into_iter()
-            .map(|x| {
-                let (px, py) = (x.1[0], x.1[1]);
-                let z = a * (w * px).cos() * (w * py).cos();
-                (px * px + py * py + z * z, [px, py, z], x.2, x.3)
-            })
-            .collect();
-        nb.sort_by(|p, q| p.0.total_cmp(&q.0));
+        let nb = tight_relief();
         let (edge, v0) = ([0.0, 0.01], [0.0, 0.0, 0.003]);
         assert!(precise(0.04 * h, h) && !precise(0.06 * h, h));
         let as_precise = project(v0, 2, edge, &nb, h, 0.04 * h)[2] - v0[2];
