@@ -316,7 +316,6 @@ pub fn reconstruct(
     for p in &mut levels {
         p.point_weight = coarse.point_weight;
         p.sigma_vox = smoothing_on(params, &coarse.noise, spacing, p.spacing);
-        p.noise_voxels = coarse.noise.sigma_voxels();
         p.fit_noise_voxels = coarse.noise.fit_noise_voxels();
     }
     for i in 0..levels.len() {
@@ -435,7 +434,7 @@ pub fn reconstruct(
         point_weight: plan.point_weight,
         smooth_voxels: plan.sigma_vox,
         sample_spacing_voxels: spacing.map(|s| s / plan.spacing),
-        noise_voxels: plan.noise_voxels,
+        noise_voxels: noise.sigma_voxels(),
         pair_noise_voxels: noise.pair_sigma_voxels(),
         jet_noise_voxels: noise.jet_sigma_voxels(),
         coarse_iterations,

@@ -156,11 +156,6 @@ pub struct Plan {
     /// [`crate::recon::screen`].
     #[serde(default)]
     pub point_weight: f64,
-    /// The samples' spread across the surface in fine voxels, measured by the coarse pass
-    /// ([`crate::recon::screen::NoiseStats`]; `None` before it, or where no fine voxel holds
-    /// two samples).
-    #[serde(default)]
-    pub noise_voxels: Option<f64>,
     /// The noise the vertex fit allows for, in fine voxels
     /// ([`crate::recon::screen::NoiseStats::fit_noise_voxels`]; `None` before the coarse pass,
     /// or where nothing was measured).
@@ -204,7 +199,6 @@ impl Plan {
             sigma_vox,
             coarse_sigma_vox: sigma_vox,
             point_weight,
-            noise_voxels: None,
             fit_noise_voxels: None,
             confidence: false,
         }
