@@ -131,8 +131,9 @@ impl RunIdentity {
             // The measured width's and weight's rules are part of it: a run before the sparse
             // floor (`recon::screen::sparse_floor_voxels`) solved sparse samples otherwise,
             // and one before the noise of close pairs (`NoiseStats::pair_sigma_voxels`)
-            // weighed and smoothed noisy relief otherwise (its coarse checkpoint is of an
-            // older format too).
+            // weighed and smoothed noisy relief otherwise, as one before those pairs were cut
+            // (`PairStats::nugget`) did folded relief (their coarse checkpoints are of older
+            // formats too).
             (
                 "--smooth",
                 match params.smoothing {
@@ -146,8 +147,10 @@ impl RunIdentity {
             (
                 "--point-weight",
                 format!(
-                    "{}, noise from close pairs, the relief's share from {} voxel of noise to {}",
+                    "{}, noise from close pairs cut at {} spreads, the relief's share from {} \
+                     voxel of noise to {}",
                     params.point_weight,
+                    crate::recon::screen::PAIR_TRIM_SIGMAS,
                     crate::surface::fit::FIT_NOISE_LIMIT_VOXELS,
                     crate::recon::screen::NOISE_DOMINANT_VOXELS
                 ),

@@ -1,5 +1,5 @@
-//! The work directory's checkpoint formats: the coarse pass's results (`SFCOARS2`), a split
-//! run's chunks of the coarse pass's parts (`SFDPART1`, `SFSPART2`), a leaf's detail
+//! The work directory's checkpoint formats: the coarse pass's results (`SFCOARS3`), a split
+//! run's chunks of the coarse pass's parts (`SFDPART1`, `SFSPART3`), a leaf's detail
 //! (`SFLEAF03`) and a tile's mesh (`SFTILE07`, positions relative to the cube's lower
 //! corner), all zstd-compressed little-endian records written atomically, so that a killed
 //! run leaves each file whole or absent and a resumed run reuses what it finds.
@@ -305,7 +305,7 @@ pub fn read_tile(path: &Path) -> Result<TileMesh> {
 /// then four arrays each after its length (u64): the coarse solution (f32), the sampling
 /// density's counts (u32), the support's bits (u64) and the occupied leaf cells' keys (u64);
 /// then the CRC-32 of all that.
-const COARSE_MAGIC: &[u8; 8] = b"SFCOARS2";
+const COARSE_MAGIC: &[u8; 8] = b"SFCOARS3";
 
 /// The coarse pass's results, as a checkpoint holds them: the grids borrowed when written,
 /// owned when read back.
@@ -415,7 +415,7 @@ pub fn read_coarse(path: &Path) -> Result<Option<CoarseCheckpoint<'static>>> {
 
 /// A split run's share of the coarse pass for a chunk of store cells, one of two kinds:
 /// the cells' density parts (`SFDPART1`, [`write_density_parts`]) or their splats
-/// (`SFSPART2`, [`write_splat_parts`]), each in the leaf checkpoints' directory `dir`.
+/// (`SFSPART3`, [`write_splat_parts`]), each in the leaf checkpoints' directory `dir`.
 pub fn coarse_part_path(dir: &Path, kind: CoarsePartKind, chunk: usize) -> PathBuf {
     dir.join(format!("coarse-{}-{chunk:06}.zst", kind.name()))
 }
@@ -473,12 +473,12 @@ impl CellSplat {
 /// each axis) and the counts (u32); then the CRC-32 of all that; zstd-compressed.
 const DENSITY_PARTS_MAGIC: &[u8; 8] = b"SFDPART1";
 
-/// `SFSPART2`: the cell count (u64), then per cell ([`CellSplat`]): the splat's `lo` (i64 as
+/// `SFSPART3`: the cell count (u64), then per cell ([`CellSplat`]): the splat's `lo` (i64 as
 /// u64) and `dims` (u64) per axis and its values (3 f32 a node); the screening's entry count
 /// (u64) and entries (key u64, the offsets' sums 3 f64, count u64); the noise statistics (as
-/// in `SFCOARS2`); the moments' 10 sums (f64); the marks' and the leaves' counts (u64) and
+/// in `SFCOARS3`); the moments' 10 sums (f64); the marks' and the leaves' counts (u64) and
 /// values (u64); then the CRC-32; zstd-compressed.
-const SPLAT_PARTS_MAGIC: &[u8; 8] = b"SFSPART2";
+const SPLAT_PARTS_MAGIC: &[u8; 8] = b"SFSPART3";
 
 /// Write the density parts of a chunk's cells to `path`.
 pub fn write_density_parts(path: &Path, parts: &[DensityBox]) -> Result<()> {
@@ -597,7 +597,7 @@ pub fn read_splat_parts(path: &Path) -> Result<Vec<CellSplat>> {
     })
 }
 
-/// The noise statistics as `SFCOARS2` and `SFSPART2` hold them.
+/// The noise statistics as `SFCOARS3` and `SFSPART3` hold them.
 fn put_noise(w: &mut LeWriter, n: &NoiseStats) {
     w.f64(n.sum_sq);
     w.u64(n.dof);
@@ -606,7 +606,7 @@ fn put_noise(w: &mut LeWriter, n: &NoiseStats) {
         w.u64(j.dof);
         w.u64(j.fits);
     }
-    for x in n.pairs.xs.iter().chain(&n.pairs.xy) {
+    for x in n.pairs.bins.iter().flatten().flatten() {
         w.f64(*x);
     }
 }
@@ -624,7 +624,7 @@ fn get_noise(r: &mut LeReader) -> Option<NoiseStats> {
         j.dof = r.u64()?;
         j.fits = r.u64()?;
     }
-    for x in noise.pairs.xs.iter_mut().chain(&mut noise.pairs.xy) {
+    for x in noise.pairs.bins.iter_mut().flatten().flatten() {
         *x = r.f64()?;
     }
     Some(noise)
@@ -641,6 +641,7 @@ fn write_record(path: &Path, w: LeWriter) -> Result<()> {
 mod tests {
     use super::*;
     use crate::recon::pou::quantise_detail;
+    use crate::recon::screen::{PAIR_BINS, PAIR_X_BINS};
 
     #[test]
     fn coarse_checkpoints_round_trip_and_bad_ones_are_named() {
@@ -666,8 +667,11 @@ mod tests {
                     },
                 ],
                 pairs: PairStats {
-                    xs: [1500.0, 300.5, 90.25],
-                    xy: [700.0, 150.125],
+                    bins: std::array::from_fn(|j| {
+                        std::array::from_fn(|i| {
+                            [i as f64, 0.5, 0.25 * i as f64, 7.0, -1.5 * j as f64]
+                        })
+                    }),
                 },
             },
             field: Cow::Borrowed(&[1.0, -2.5, f32::MIN_POSITIVE]),
@@ -682,7 +686,7 @@ mod tests {
         let z = std::fs::read(&path).unwrap();
         let raw = zstd::stream::decode_all(&z[..]).unwrap();
         let mut flipped = raw.clone();
-        flipped[8 + 4 + 8 + 16 + 48 + 40 + 8 + 12 + 8] ^= 1;
+        flipped[8 + 4 + 8 + 16 + 48 + 40 * PAIR_BINS * PAIR_X_BINS + 8 + 12 + 8] ^= 1;
         for cut in [&raw[..raw.len() - 3], &flipped[..], &b"SFLEAF03xxxx"[..]] {
             std::fs::write(&path, zstd::bulk::compress(cut, 1).unwrap()).unwrap();
             let e = read_coarse(&path).unwrap_err().to_string();
@@ -720,8 +724,9 @@ mod tests {
                     fits: 1,
                 }; 2],
                 pairs: PairStats {
-                    xs: [2.0, 0.5, 0.125],
-                    xy: [1.0, 0.25],
+                    bins: std::array::from_fn(|j| {
+                        std::array::from_fn(|i| [2.0, 0.5, 0.125, j as f64, 0.25 * i as f64])
+                    }),
                 },
             },
             moments: std::array::from_fn(|i| i as f64 * 0.5 - 1.0),

@@ -78,12 +78,14 @@
 //!   | none | 1 | | | | 5.4 | 0: 2.28 | 6.6 |
 //!
 //!   Short relief keeps most of the weight, long relief and plain noise lose it all. The
-//!   samples of noise under the fit's limit keep their weight (the raw bunny scans, 0.215
+//!   samples of noise under the fit's limit keep their weight (the raw bunny scans, 0.171
 //!   voxel); `autzen_trim.las` (1.10 voxel, `s` 0.29) goes from 2.39 to 1.70, a smoother
 //!   ground (area-weighted mean |n_z| 0.9498 against 0.9445) in 62 pieces against 47. A
-//!   relief that folds within a voxel (2% amplitude at 8 voxels' wavelength) reads as noise
-//!   between close samples (1.28 voxel) and so loses weight it needs: 2.2·10⁻³ against
-//!   PoissonRecon's 1.3·10⁻³.
+//!   relief that folds within a voxel (2% amplitude at 8 voxels' wavelength) needs the
+//!   pairs' cut (below): read through its folds as noise of 1.28 voxel, it lost the weight
+//!   and the narrow Gaussian it needs (α = 1.34, one voxel: 2.2·10⁻³ against
+//!   PoissonRecon's 1.3·10⁻³); cut, it reads 0.77 and takes α = 3.64 over 0.37 voxel,
+//!   1.23·10⁻³.
 //! - *Precise samples* can take more than 4: on a 1M-point sphere carrying a relief of 1%
 //!   amplitude at depth 9, α = 32 brings a relief of 8 voxels' wavelength from 9.7·10⁻⁴ to
 //!   5.0·10⁻⁴ (no vertex fit), while with noise of 0.23 voxel it prints the noise into the
@@ -122,10 +124,32 @@
 //! 0.286/1.58/1.56. It needs normals that follow the relief (a scan's estimated ones do
 //! where the relief is wider than their neighbourhood) and samples closer than
 //! [`PAIR_MAX_VOXELS`]; where under [`PAIR_MIN_COUNT`] pairs are found the quadrics' figure
-//! stands in. Airborne LiDAR's vegetation, returns stacked over one ground point, reads as
-//! noise here too (`autzen_trim.las` at depth 9: 0.099 within voxels, 1.10 between close
-//! samples, 2.06 about quadrics), so its weight still falls (to 2.4, where the quadrics
-//! alone gave 0.68).
+//! stands in.
+//!
+//! **Folds and volumes.** Where a relief folds within a disc (a curvature radius under a
+//! voxel), the disc holds two sheets of it, and pairs of samples close across their mean
+//! normal lie on different sheets, several voxels apart along it, at any distance across:
+//! their height differences raise the line's intercept, not its slope. The 2% relief of 8
+//! voxels' wavelength reads 0.98 voxel noise-free and 1.28 with noise of 0.8. So the line
+//! is fitted to the pairs whose height difference lies within [`PAIR_TRIM_SIGMAS`] = 2.5
+//! standard deviations of the spread the line itself gives at their distance,
+//! `√(2(σ² + c x))`, and its intercept divided by the share of a normal variance within
+//! that cut (0.911, [`trimmed_variance_share`]). The cut starts from a hundredth of a
+//! voxel and widens round by round to the first spread that reads itself back
+//! ([`PairStats::nugget`]): normal noise then keeps 98.8% of its pairs and reads as
+//! before (a plain sphere with noise 0.8: 0.812 against 0.808 uncut; 1.6: 1.587 against
+//! 1.575), the folded relief 89%, read as 0.77 voxel. A second sheet nearer than about
+//! four standard deviations of the noise merges with it. Airborne LiDAR's vegetation,
+//! returns scattered through the metres above the ground, is no fold: cut, a third of
+//! `autzen_trim.las`'s pairs lie beyond and the ground reads 0.05 voxel, which would
+//! weigh and sharpen every canopy into a surface. Where more than [`PAIR_SHEETS_SHARE`]
+//! (15–25%) of the pairs lie beyond the cut, the line through all of them stands, and the
+//! vegetation reads as noise (0.099 within voxels, 1.10 between close samples, 2.06 about
+//! quadrics at depth 9), so its weight still falls (to 1.70, where the quadrics alone gave
+//! 0.68). The raw bunny scans leave 8% beyond, their misregistered overlaps, and read
+//! 0.171 voxel against 0.215 uncut. Noise-free, nearly every pair of the folded relief
+//! lies beyond a cut near zero, so its uncut 0.98 stands too; its samples read precise
+//! within voxels, and the rules for precise samples take no figure from the pairs.
 //!
 //! All are one number per run, from every point in a fixed order: the coarse and the leaf
 //! solves, and any thread count, tile size or shard, share it. Where nothing could be
@@ -453,13 +477,22 @@ pub struct NoiseStats {
 /// Pairs of samples on a jet fit's narrow disc, pooled: the least-squares sums of the
 /// half squared height difference `y = ½((p_j − p_i)·m)²` along the pair's mean normal `m`
 /// against their squared distance across it, `x` (in fine voxels), for pairs under
-/// [`PAIR_MAX_VOXELS`] apart across `m` ([`NoiseStats::pair_sigma_voxels`]).
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
+/// [`PAIR_MAX_VOXELS`] apart across `m`, kept apart by distance and by height difference
+/// `|Δh|` ([`pair_bin`]) so that the estimate can leave out the pairs of two sheets of a
+/// fold ([`PairStats::nugget`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PairStats {
-    /// `[Σ1, Σx, Σx²]`.
-    pub xs: [f64; 3],
-    /// `[Σy, Σxy]`.
-    pub xy: [f64; 2],
+    /// Per bin of `x` ([`PAIR_X_BINS`] equal ones up to [`PAIR_MAX_VOXELS`]`²`) and of
+    /// `|Δh|` ([`pair_bin`]): `[Σ1, Σx, Σx², Σy, Σxy]`.
+    pub bins: [[[f64; 5]; PAIR_BINS]; PAIR_X_BINS],
+}
+
+impl Default for PairStats {
+    fn default() -> Self {
+        PairStats {
+            bins: [[[0.0; 5]; PAIR_BINS]; PAIR_X_BINS],
+        }
+    }
 }
 
 /// The farthest apart across their mean normal two samples of a pair are taken, in fine
@@ -473,31 +506,176 @@ pub const PAIR_MAX_SAMPLES: usize = 128;
 /// Fewest pairs [`NoiseStats::pair_sigma_voxels`] reads.
 pub const PAIR_MIN_COUNT: f64 = 1000.0;
 
+/// Bins of the pairs' squared distance across their normal ([`PairStats`]): the spread of
+/// their height difference grows with it, and each bin is cut at its own.
+pub const PAIR_X_BINS: usize = 6;
+
+/// Bins of the pairs' height difference ([`pair_bin`]): six an octave from
+/// [`PAIR_BIN_FIRST_VOXELS`], the last one from 12.9 voxels on, farther than two samples
+/// of a disc lie apart (12.4 at most: twice [`JET_HEIGHT_VOXELS`] along its normal, twice
+/// the narrow radius across), so that it holds only what no cut keeps.
+pub const PAIR_BINS: usize = 64;
+
+/// The first bin's upper edge, in fine voxels ([`pair_bin`]).
+pub const PAIR_BIN_FIRST_VOXELS: f64 = 0.01;
+
+/// Bins of [`PairStats`] an octave of the height difference spans.
+const PAIR_BINS_PER_OCTAVE: f64 = 6.0;
+
+/// The bin of a height difference `|Δh|` (fine voxels): 0 under [`PAIR_BIN_FIRST_VOXELS`],
+/// then `i` for `|Δh|` in `[e(i − 1), e(i))`, `e(i) = first · 2^(i/6)` ([`pair_bin_edge`]),
+/// the last bin holding all beyond.
+pub fn pair_bin(dh: f64) -> usize {
+    if dh.is_nan() || dh < PAIR_BIN_FIRST_VOXELS {
+        return 0;
+    }
+    let i = (PAIR_BINS_PER_OCTAVE * (dh / PAIR_BIN_FIRST_VOXELS).log2()).floor() as usize + 1;
+    i.min(PAIR_BINS - 1)
+}
+
+/// The upper edge of bin `i` ([`pair_bin`]), in fine voxels.
+pub fn pair_bin_edge(i: usize) -> f64 {
+    PAIR_BIN_FIRST_VOXELS * (i as f64 / PAIR_BINS_PER_OCTAVE).exp2()
+}
+
+/// The bin of a squared distance `x` (squared fine voxels, at most [`PAIR_MAX_VOXELS`]`²`).
+fn pair_x_bin(x: f64) -> usize {
+    let i = (x.max(0.0) / (PAIR_MAX_VOXELS * PAIR_MAX_VOXELS) * PAIR_X_BINS as f64) as usize;
+    i.min(PAIR_X_BINS - 1)
+}
+
+/// Where the estimate of the pairs' noise cuts their height differences, in their standard
+/// deviation at their distance ([`PairStats::nugget`]).
+pub const PAIR_TRIM_SIGMAS: f64 = 2.5;
+
+/// The share of the pairs beyond the cut ([`PairStats::nugget`]) up to which they are
+/// taken for the sheets of a fold and left out, and from which for a volume of returns
+/// and kept, linearly in between. Normal noise leaves 1.2% beyond; on the 1M-point sphere
+/// carrying a relief of 2% amplitude at 8 voxels' wavelength with noise of 0.8 voxel, 11%
+/// lie beyond; on `autzen_trim.las` (airborne LiDAR, returns stacked in its vegetation)
+/// 33%, whose cut reading (0.05 voxel) would take the vegetation for surfaces.
+pub const PAIR_SHEETS_SHARE: [f64; 2] = [0.15, 0.25];
+
+/// Rounds of the trimmed estimate at most ([`PairStats::nugget`]); it settles in a few.
+const PAIR_TRIM_ROUNDS: usize = 100;
+
+/// The share of a normal distribution's variance within `±k` standard deviations,
+/// `E[z² | |z| ≤ k] = 1 − 2kφ(k)/(2Φ(k) − 1)`, by Simpson's rule on both integrals.
+pub fn trimmed_variance_share(k: f64) -> f64 {
+    let steps = 2000;
+    let dz = k / steps as f64;
+    let (mut mass, mut second) = (0.0, 0.0);
+    for i in 0..=steps {
+        let z = i as f64 * dz;
+        let w = if i == 0 || i == steps {
+            1.0
+        } else if i % 2 == 1 {
+            4.0
+        } else {
+            2.0
+        };
+        let phi = (-0.5 * z * z).exp();
+        mass += w * phi;
+        second += w * z * z * phi;
+    }
+    second / mass
+}
+
+/// The least-squares line `y = a + c x` through sums `[Σ1, Σx, Σx², Σy, Σxy]` as
+/// `(a, c)`, or `None` under [`PAIR_MIN_COUNT`] pairs or where they all lie equally far
+/// apart.
+fn line(s: [f64; 5]) -> Option<(f64, f64)> {
+    let [n, sx, sxx, sy, sxy] = s;
+    let det = n * sxx - sx * sx;
+    (n >= PAIR_MIN_COUNT && det > 1e-12 * n * sxx)
+        .then(|| ((sxx * sy - sx * sxy) / det, (n * sxy - sx * sy) / det))
+}
+
 impl PairStats {
-    fn add_pair(&mut self, x: f64, y: f64) {
-        self.xs[0] += 1.0;
-        self.xs[1] += x;
-        self.xs[2] += x * x;
-        self.xy[0] += y;
-        self.xy[1] += x * y;
+    fn add_pair(&mut self, x: f64, dh: f64) {
+        let y = 0.5 * dh * dh;
+        let b = &mut self.bins[pair_x_bin(x)][pair_bin(dh.abs())];
+        for (s, v) in b.iter_mut().zip([1.0, x, x * x, y, x * y]) {
+            *s += v;
+        }
     }
 
     fn add(&mut self, other: PairStats) {
-        for k in 0..3 {
-            self.xs[k] += other.xs[k];
-        }
-        for k in 0..2 {
-            self.xy[k] += other.xy[k];
+        for (a, b) in self.bins.iter_mut().zip(other.bins) {
+            for (a, b) in a.iter_mut().zip(b) {
+                for (s, v) in a.iter_mut().zip(b) {
+                    *s += v;
+                }
+            }
         }
     }
 
-    /// The intercept of the least-squares line `y = s² + c x`, or `None` under
-    /// [`PAIR_MIN_COUNT`] pairs or where they all lie equally far apart.
-    fn nugget(&self) -> Option<f64> {
-        let [n, sx, sxx] = self.xs;
-        let [sy, sxy] = self.xy;
-        let det = n * sxx - sx * sx;
-        (n >= PAIR_MIN_COUNT && det > 1e-12 * n * sxx).then(|| (sxx * sy - sx * sxy) / det)
+    /// The sums over the pairs whose height difference is under `cut(x̄)` (fine voxels),
+    /// `x̄` the mean squared distance of each distance bin's pairs: whole bins below it,
+    /// and of the bin it falls in the share under it (linear in `|Δh|`, so that the sums,
+    /// and the estimate, move continuously with the cut).
+    fn below(&self, cut: impl Fn(f64) -> f64) -> [f64; 5] {
+        let mut sum = [0.0; 5];
+        for xb in &self.bins {
+            let n: f64 = xb.iter().map(|b| b[0]).sum();
+            if n == 0.0 {
+                continue;
+            }
+            let t = cut(xb.iter().map(|b| b[1]).sum::<f64>() / n);
+            for (i, b) in xb.iter().enumerate() {
+                let lo = if i == 0 { 0.0 } else { pair_bin_edge(i - 1) };
+                let hi = pair_bin_edge(i);
+                let share = if i + 1 == PAIR_BINS {
+                    if t >= f64::MAX { 1.0 } else { 0.0 }
+                } else {
+                    ((t - lo) / (hi - lo)).clamp(0.0, 1.0)
+                };
+                if share == 0.0 {
+                    break;
+                }
+                for (s, v) in sum.iter_mut().zip(b) {
+                    *s += share * v;
+                }
+            }
+        }
+        sum
+    }
+
+    /// The noise `σ²` the pairs read: the intercept of the line `y = σ² + c x` fitted to
+    /// the pairs whose height difference lies within [`PAIR_TRIM_SIGMAS`] of its spread
+    /// at their distance, `√(2(σ² + c x))`, divided by the share of a normal variance so
+    /// kept ([`trimmed_variance_share`]). The cut starts at [`PAIR_BIN_FIRST_VOXELS`] of
+    /// noise and is repeated until it settles: from below, each round widens it (for
+    /// normal noise by about 2.3 times in `σ²` while far under it), and it stops at the
+    /// narrowest spread that reads itself back, the noise's, before the pairs across two
+    /// sheets of a fold. Where the pairs beyond the cut are more than a fold's
+    /// ([`PAIR_SHEETS_SHARE`]) they are a volume of returns, and the line through all
+    /// pairs stands (module docs). `None` under [`PAIR_MIN_COUNT`] pairs or where they
+    /// all lie equally far apart.
+    pub fn nugget(&self) -> Option<f64> {
+        let all = self.below(|_| f64::MAX);
+        let (whole, _) = line(all)?;
+        let share = trimmed_variance_share(PAIR_TRIM_SIGMAS);
+        let (mut a, mut c) = (PAIR_BIN_FIRST_VOXELS * PAIR_BIN_FIRST_VOXELS, 0.0);
+        let cut =
+            |a: f64, c: f64| move |x: f64| PAIR_TRIM_SIGMAS * (2.0 * (a + c * x).max(0.0)).sqrt();
+        for _ in 0..PAIR_TRIM_ROUNDS {
+            let Some((na, nc)) = line(self.below(cut(a, c))) else {
+                // Too few pairs under the cut: widen it.
+                a *= 2.0;
+                continue;
+            };
+            let (na, nc) = (na / share, nc / share);
+            let settled = (na - a).abs() <= 1e-12 * a && (nc - c).abs() <= 1e-12 * c.abs();
+            (a, c) = (na, nc);
+            if settled || a <= 0.0 {
+                break;
+            }
+        }
+        let beyond = 1.0 - self.below(cut(a, c))[0] / all[0];
+        let [from, to] = PAIR_SHEETS_SHARE;
+        let t = ((beyond - from) / (to - from)).clamp(0.0, 1.0);
+        Some((1.0 - t) * a + t * whole)
     }
 }
 
@@ -670,10 +848,10 @@ impl NoiseStats {
                         continue;
                     }
                     let e = [0, 1, 2].map(|k| b.0[k] - a.0[k]);
-                    let h2 = dot(e, m).powi(2) / l2;
-                    let x = dot(e, e) - h2;
+                    let dh = dot(e, m) / l2.sqrt();
+                    let x = dot(e, e) - dh * dh;
                     if x <= PAIR_MAX_VOXELS * PAIR_MAX_VOXELS {
-                        self.pairs.add_pair(x, 0.5 * h2);
+                        self.pairs.add_pair(x, dh);
                     }
                 }
             }
@@ -1329,7 +1507,8 @@ mod tests {
 
     /// `n` samples of the relief `z = 0.5 + a h sin(2πx/λh) sin(2πy/λh)` over a 0.5-wide
     /// square (`λ` and `a` in voxels of `h`), with its exact normals, moved by noise of `s`
-    /// voxels along z.
+    /// voxels along each axis (as `scanflow synth` draws it: `s` across the surface
+    /// wherever it faces).
     fn relief(n: usize, a: f64, lambda: f64, s: f64, h: f64) -> (Vec<[f64; 3]>, Vec<[f32; 3]>) {
         use rand::{Rng, SeedableRng};
         use rand_distr::StandardNormal;
@@ -1338,13 +1517,13 @@ mod tests {
         (0..n)
             .map(|_| {
                 let (x, y): (f64, f64) = (0.5 * rng.random::<f64>(), 0.5 * rng.random::<f64>());
-                let g: f64 = rng.sample(StandardNormal);
-                let z = 0.5 + a * h * (k * x).sin() * (k * y).sin() + s * h * g;
+                let g: [f64; 3] = [0; 3].map(|_| rng.sample(StandardNormal));
+                let z = 0.5 + a * h * (k * x).sin() * (k * y).sin() + s * h * g[2];
                 let gx = a * h * k * (k * x).cos() * (k * y).sin();
                 let gy = a * h * k * (k * x).sin() * (k * y).cos();
                 let l = (1.0 + gx * gx + gy * gy).sqrt();
                 (
-                    [x, y, z],
+                    [x + s * h * g[0], y + s * h * g[1], z],
                     [(-gx / l) as f32, (-gy / l) as f32, (1.0 / l) as f32],
                 )
             })
@@ -1355,8 +1534,8 @@ mod tests {
     fn pairs_read_the_noise_and_not_the_relief() {
         // 40K samples on 2,500 voxels (16 a voxel) of a relief of 1.5 voxels' amplitude and
         // 5 voxels' wavelength, tighter than a quadric on 1.5 voxels follows: the quadrics
-        // read it as noise (1.01 voxel noise-free, 1.30 and 1.79 with noise of 0.5 and 1),
-        // the pairs of close samples do not (0.00, 0.49, 1.00).
+        // read it as noise (1.01 voxel noise-free, 1.25 and 1.58 with noise of 0.5 and 1),
+        // the pairs of close samples do not (0.00, 0.49, 1.02).
         let h = 0.01;
         for s in [0.0, 0.5, 1.0] {
             let (pos, nrm) = relief(40_000, 1.5, 5.0, s, h);
@@ -1389,6 +1568,64 @@ mod tests {
         let st = NoiseStats::of(&pos, &nrm, [0.0; 3], h);
         assert_eq!(st.pair_sigma_voxels(), None);
         assert_eq!(st.noise_voxels(), st.jet_sigma_voxels());
+    }
+
+    #[test]
+    fn pairs_of_two_sheets_of_a_fold_do_not_read_as_noise() {
+        // Two noisy planes 5 voxels apart, both facing up, as the sheets of a relief that
+        // folds within a disc, the second with a fifteenth of the samples (as a fold's
+        // far sheet holds a minority of a disc's): the pairs across the sheets differ by 5
+        // voxels, and read as noise they would nearly double it. Cut at 2.5 standard deviations,
+        // the estimate reads the noise of one sheet.
+        let h = 0.01;
+        for s in [0.3, 0.5, 0.7] {
+            let (mut pos, mut nrm) = noisy_plane(20_000, s, h, 21);
+            let (upper, up_nrm) = noisy_plane(1_300, s, h, 22);
+            pos.extend(upper.iter().map(|p| [p[0], p[1], p[2] + 5.0 * h]));
+            nrm.extend(up_nrm);
+            let st = NoiseStats::of(&pos, &nrm, [0.0; 3], h);
+            let pairs = st.pair_sigma_voxels().unwrap();
+            assert!((pairs - s).abs() < 0.06 * s, "{s}: {pairs}");
+            let all = line(st.pairs.below(|_| f64::MAX)).unwrap().0.sqrt();
+            assert!(all > 1.8 * s, "{s}: untrimmed {all}");
+        }
+    }
+
+    #[test]
+    fn a_volume_of_returns_reads_as_noise() {
+        // A precise ground (0.05 voxel) under as many returns again scattered through the
+        // 5 voxels above it, as airborne LiDAR over vegetation: most pairs lie beyond any
+        // cut near the ground's noise, and the line through all of them stands.
+        let h = 0.01;
+        let (mut pos, mut nrm) = noisy_plane(20_000, 0.05, h, 23);
+        let (canopy, up) = noisy_plane(20_000, 0.0, h, 24);
+        let mut z = 0.0f64;
+        pos.extend(canopy.iter().map(|p| {
+            z = (z + 0.618_033_988_749_895) % 1.0;
+            [p[0], p[1], p[2] + 5.0 * h * z]
+        }));
+        nrm.extend(up);
+        let st = NoiseStats::of(&pos, &nrm, [0.0; 3], h);
+        let all = line(st.pairs.below(|_| f64::MAX)).unwrap().0.sqrt();
+        let pairs = st.pair_sigma_voxels().unwrap();
+        assert!(all > 1.0, "{all}");
+        assert!((pairs - all).abs() < 1e-9 * all, "{pairs} against {all}");
+    }
+
+    #[test]
+    fn the_trimmed_share_of_a_normal_variance() {
+        // 1 − 2kφ(k)/(2Φ(k) − 1), from scipy.stats.norm.
+        assert!((trimmed_variance_share(2.5) - 0.911_256_360_935_392).abs() < 1e-9);
+        assert!((trimmed_variance_share(3.0) - 0.973_336_924_662_541_5).abs() < 1e-9);
+        assert!((trimmed_variance_share(12.0) - 1.0).abs() < 1e-9);
+        // The bins: each height difference in the bin whose edges hold it.
+        for dh in [0.0, 0.009, 0.01, 0.0101, 0.3, 1.0, 4.7, 11.0] {
+            let i = pair_bin(dh);
+            let lo = if i == 0 { 0.0 } else { pair_bin_edge(i - 1) };
+            assert!(lo <= dh && dh < pair_bin_edge(i), "{dh}: bin {i}");
+        }
+        assert_eq!(pair_bin(1e6), PAIR_BINS - 1);
+        assert_eq!(pair_bin(f64::NAN), 0);
     }
 
     #[test]
@@ -1459,12 +1696,15 @@ mod tests {
     }
 
     /// Pairs of close samples whose nugget is `sigma²` (squared voxels), on a line of slope
-    /// 0.5 in the squared distance.
+    /// 0.5 in the squared distance: one height difference at each distance, scaled by the
+    /// share of a normal variance the trimmed estimate keeps, so that it reads `sigma`
+    /// exactly (for `sigma` of 0.3 voxel or more, whose pairs all lie within its cut).
     fn pairs_reading(sigma: f64) -> PairStats {
+        let share = trimmed_variance_share(PAIR_TRIM_SIGMAS);
         let mut p = PairStats::default();
         for i in 0..PAIR_MIN_COUNT as usize {
             let x = (i % 10) as f64 * 0.05;
-            p.add_pair(x, sigma * sigma + 0.5 * x);
+            p.add_pair(x, (2.0 * share * (sigma * sigma + 0.5 * x)).sqrt());
         }
         p
     }

@@ -337,14 +337,16 @@ const MISFIT_SHARE: f64 = 1.0;
 /// figure pooled over the scan, and a real scan's noise is not the same everywhere: where
 /// merged scans overlap, their misregistration adds to it. There a neighbourhood's residuals
 /// exceed `σ` with no relief to follow, and counted whole as misfit they held its vertices
-/// on the smoothed field. Measured on the raw bunny scans at depth 8 (`σ` 0.215 voxel
-/// between close samples; two-sided mean distance to `bun_zipper` ·10⁻⁴, Open3D 1.940):
-/// share 1 1.817, 0.7 1.804, 0.5 1.785; the precise relief rows keep 1. The price is on
-/// synthetic relief whose noise is uniform, of a quarter voxel, at depth 9 (1M points,
-/// mean distance ·10⁻⁴, share 1 → 0.5, unfitted in brackets): 1% amplitude at 12 voxels'
-/// wavelength 4.98 → 5.30 (4.82), 2% at 18 voxels 4.58 → 4.90 (4.41). Counting the noise's
-/// own χ² spread as explained instead (up to `σ²(1 + z√(2/dof))`) cost those rows more for
-/// less: z = 2 gave the bunny 1.781 and the 12-voxel row 5.46.
+/// on the smoothed field. Measured on the raw bunny scans at depth 8 (`σ` 0.171 voxel
+/// between close samples, 0.215 before the pairs' cut; two-sided mean distance to
+/// `bun_zipper` ·10⁻⁴, Open3D 1.940): share 1 1.837, 0.7 1.823, 0.5 1.804, 0.3 1.768,
+/// 0 1.760 (with the uncut `σ`: 1 1.817, 0.7 1.804, 0.5 1.785); the precise relief rows
+/// keep a share of 1. The price is on synthetic relief whose noise is uniform, of a
+/// quarter voxel, at depth 9 (1M points, mean distance ·10⁻⁴, share 1 → 0.5 → 0.3,
+/// unfitted in brackets): 1% amplitude at 12 voxels' wavelength 4.98 → 5.31 → 5.92
+/// (4.91), 2% at 18 voxels 4.58 → 4.98 → 5.48 (4.53). Counting the noise's own χ² spread
+/// as explained instead (up to `σ²(1 + z√(2/dof))`) cost those rows more for less: z = 2
+/// gave the bunny 1.781 and the 12-voxel row 5.46.
 const NOISY_MISFIT_SHARE: f64 = 0.5;
 
 /// Residuals within this many times the samples' measured noise `σ` are taken as noise, not
