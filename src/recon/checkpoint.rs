@@ -460,12 +460,13 @@ pub struct CellSplat {
 }
 
 impl CellSplat {
-    /// Bytes the share holds.
+    /// Bytes the share holds: its grids and lists, and the share itself (most of it the
+    /// noise statistics' pair bins, [`crate::recon::screen::PairStats`]).
     pub fn bytes(&self) -> u64 {
         self.splat.bytes()
             + SCREEN_PART_ENTRY_BYTES * self.screen.len() as u64
             + 8 * (self.marks.len() + self.leaves.len()) as u64
-            + 200
+            + std::mem::size_of::<Self>() as u64
     }
 }
 
