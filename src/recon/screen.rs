@@ -601,12 +601,9 @@ impl PairStats {
     }
 
     fn add(&mut self, other: PairStats) {
-        for (a, b) in self.bins.iter_mut().zip(other.bins) {
-            for (a, b) in a.iter_mut().zip(b) {
-                for (s, v) in a.iter_mut().zip(b) {
-                    *s += v;
-                }
-            }
+        let sums = self.bins.iter_mut().flatten().flatten();
+        for (s, v) in sums.zip(other.bins.iter().flatten().flatten()) {
+            *s += v;
         }
     }
 
