@@ -693,8 +693,8 @@ fn dihedral_range(c: [[f64; 3]; 4]) -> (f64, f64) {
 /// ([`crate::winding`]): about 1 inside, 0 outside, ½ on the surface.
 ///
 /// ```
-/// use scanflow::hex::stuffing::{StuffingParams, stuff};
-/// use scanflow::hex::winding::WindingNumber;
+/// use scanflow_hex::stuffing::{StuffingParams, stuff};
+/// use scanflow_hex::winding::WindingNumber;
 ///
 /// // The octahedron |x| + |y| + |z| ≤ 1 (volume 4/3), wound counter-clockwise from outside.
 /// let vertices = vec![

@@ -497,27 +497,27 @@ impl ReconstructConfig {
             }
         }
         let work_dir = work_dir(a.work_dir, &a.output)?;
-        let mut params = ReconParams::new(a.depth, work_dir);
-        params.tile_voxels = a.tile;
-        params.coarse_depth = a.coarse_depth;
-        params.resume = a.resume;
-        params.error = error;
-        params.min_points = a.min_points;
-        params.trim = a.trim;
-        params.smoothing = smooth;
-        params.point_weight = point_weight;
-        params.fit = !a.no_fit;
-        params.gpu = a.gpu.into();
-        params.gpu_solve = a.gpu_solve.into();
-        params.density = a.density;
-        params.confidence = a.confidence;
         if let Some(sp) = a.samples_per_node
             && !(sp > 0.0 && sp.is_finite())
         {
             bail!("--samples-per-node {sp}: expected a positive number of samples per fine voxel");
         }
-        params.samples_per_node = a.samples_per_node;
-        params.trim_density = a.trim_density;
+        let mut params = ReconParams::new(a.depth, work_dir);
+        params.solve.coarse_depth = a.coarse_depth;
+        params.solve.smoothing = smooth;
+        params.solve.point_weight = point_weight;
+        params.solve.error = error;
+        params.solve.min_points = a.min_points;
+        params.solve.samples_per_node = a.samples_per_node;
+        params.solve.confidence = a.confidence;
+        params.mesh.fit = !a.no_fit;
+        params.mesh.trim = a.trim;
+        params.mesh.density = a.density;
+        params.mesh.trim_density = a.trim_density;
+        params.run.tile_voxels = a.tile;
+        params.run.resume = a.resume;
+        params.run.gpu = a.gpu.into();
+        params.run.gpu_solve = a.gpu_solve.into();
         let hex = match a.hex {
             Some(h) => {
                 if mesh.format == MeshFormat::Stl {
@@ -579,7 +579,7 @@ impl ReconstructConfig {
                     p.display()
                 );
             }
-            params.shard = Shard::parse(text, |k| std::env::var(k).ok())?;
+            params.run.shard = Shard::parse(text, |k| std::env::var(k).ok())?;
             if let Points::Files(..) = points {
                 bail!(
                     "--shard {text}: shards reconstruct a store: ingest the point files once first (scanflow ingest FILES -o STORE, the job script's first step), then give the store to every shard"
@@ -919,10 +919,10 @@ mod tests {
         else {
             panic!("reconstruct parses");
         };
-        assert_eq!(c.params.work_dir, Path::new("m.ply.work"));
-        assert_eq!(c.params.depth, 9);
-        assert_eq!(c.params.gpu, scanflow::extract::gpu::GpuMode::Off);
-        assert!(c.params.fit && !c.params.trim && !c.keep_work);
+        assert_eq!(c.params.run.work_dir, Path::new("m.ply.work"));
+        assert_eq!(c.params.solve.depth, 9);
+        assert_eq!(c.params.run.gpu, scanflow::extract::gpu::GpuMode::Off);
+        assert!(c.params.mesh.fit && !c.params.mesh.trim && !c.keep_work);
         assert!(matches!(c.points, Points::Files(ref i, _) if i.files.len() == 1));
     }
 }

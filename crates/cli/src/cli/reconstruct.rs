@@ -12,8 +12,9 @@ use scanflow::exec::Ctx;
 use scanflow::fs::atomic;
 use scanflow::io::mesh_write::MeshTarget;
 use scanflow::normals::{NormalParams, NormalsMode};
-use scanflow::pipeline::ingest::{StoreSource, WORK_STORE, open_or_ingest};
+use scanflow::pipeline::ingest::open_or_ingest;
 use scanflow::pipeline::workdir::{self, Lease, RunIdentity};
+use scanflow::pipeline::workdir::{StoreSource, WORK_STORE};
 use scanflow::pipeline::{ReconParams, ReconStats};
 use scanflow::store::Store;
 
@@ -44,14 +45,14 @@ pub fn run(c: &ReconstructConfig, ctx: &Ctx) -> Result<()> {
                 result: serde_json::to_value(&st).unwrap_or_default(),
                 leaf_map: Some(st.leaf_map.clone()),
                 preview: st.preview.clone(),
-                triangles: (!c.params.shard.is_split()).then_some(st.faces),
+                triangles: (!c.params.run.shard.is_split()).then_some(st.faces),
                 secs,
             },
         )
     };
-    if c.params.shard.is_split() {
-        let work = workdir::resolve(&c.params.work_dir, &c.output)?;
-        report::shard(&st, c.params.shard, &work, &c.output, secs);
+    if c.params.run.shard.is_split() {
+        let work = workdir::resolve(&c.params.run.work_dir, &c.output)?;
+        report::shard(&st, c.params.run.shard, &work, &c.output, secs);
         return outputs();
     }
     report::reconstruct(&st, &c.output, secs);
@@ -82,19 +83,17 @@ pub fn reconstruct(
     let job = WorkRun {
         points,
         output: &mesh.path,
-        work_dir: &params.work_dir,
-        resume: params.resume,
+        work_dir: &params.run.work_dir,
+        resume: params.run.resume,
         keep_work,
-        shared: params.shard.is_split(),
+        shared: params.run.shard.is_split(),
     };
     job.run(
         ctx,
-        |source, mode, normal_params| RunIdentity::new(source, mode, normal_params, params),
+        |source, mode, normal_params| params.identity(source, mode, normal_params),
         |store, work| {
-            let params = ReconParams {
-                work_dir: work.to_path_buf(),
-                ..params.clone()
-            };
+            let mut params = params.clone();
+            params.run.work_dir = work.to_path_buf();
             scanflow::pipeline::reconstruct(store, mesh, &params, ctx)
         },
     )

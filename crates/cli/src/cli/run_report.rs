@@ -159,32 +159,39 @@ impl RunStart {
 pub fn recon_options(c: &ReconstructConfig) -> Vec<(String, String)> {
     let p = &c.params;
     let mut o = vec![
-        ("--depth", p.depth.to_string()),
-        ("--point-weight", p.point_weight.to_string()),
-        ("--smooth", p.smoothing.to_string()),
-        ("--error", p.error.to_string()),
-        ("--min-points", p.min_points.to_string()),
-        ("--trim", p.trim.to_string()),
-        ("--no-fit", (!p.fit).to_string()),
-        ("--density", p.density.to_string()),
-        ("--confidence", p.confidence.to_string()),
+        ("--depth", p.solve.depth.to_string()),
+        ("--point-weight", p.solve.point_weight.to_string()),
+        ("--smooth", p.solve.smoothing.to_string()),
+        ("--error", p.solve.error.to_string()),
+        ("--min-points", p.solve.min_points.to_string()),
+        ("--trim", p.mesh.trim.to_string()),
+        ("--no-fit", (!p.mesh.fit).to_string()),
+        ("--density", p.mesh.density.to_string()),
+        ("--confidence", p.solve.confidence.to_string()),
         (
             "--samples-per-node",
-            p.samples_per_node
+            p.solve
+                .samples_per_node
                 .map_or("none".to_string(), |s| s.to_string()),
         ),
         (
             "--trim-density",
-            p.trim_density.map_or("none".to_string(), |d| d.to_string()),
+            p.mesh
+                .trim_density
+                .map_or("none".to_string(), |d| d.to_string()),
         ),
         (
             "--tile",
-            p.tile_voxels
+            p.run
+                .tile_voxels
                 .map_or("64 (default)".to_string(), |t| t.to_string()),
         ),
-        ("--gpu", format!("{:?}", p.gpu).to_lowercase()),
-        ("--gpu-solve", format!("{:?}", p.gpu_solve).to_lowercase()),
-        ("--shard", p.shard.to_string()),
+        ("--gpu", format!("{:?}", p.run.gpu).to_lowercase()),
+        (
+            "--gpu-solve",
+            format!("{:?}", p.run.gpu_solve).to_lowercase(),
+        ),
+        ("--shard", p.run.shard.to_string()),
         ("format", c.mesh.format.name().to_string()),
         ("--out-normals", c.mesh.normals.to_string()),
         (
@@ -200,7 +207,7 @@ pub fn recon_options(c: &ReconstructConfig) -> Vec<(String, String)> {
         ),
         ("--mem", human_bytes(c.run.mem_bytes)),
     ];
-    o.retain(|(k, _)| *k != "--shard" || p.shard.is_split());
+    o.retain(|(k, _)| *k != "--shard" || p.run.shard.is_split());
     o.into_iter().map(|(k, v)| (k.to_string(), v)).collect()
 }
 

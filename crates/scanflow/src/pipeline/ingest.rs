@@ -4,8 +4,9 @@
 //! renamed), so a store is either complete, with its normals, or absent. Also the first step
 //! of a reconstruction: open a store, or ingest the point files into the work directory.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
+use super::workdir::{StoreSource, WORK_STORE};
 use crate::error::{Error, IoContext, Result};
 use crate::exec::Ctx;
 use crate::io::InputSpec;
@@ -18,9 +19,6 @@ pub use crate::store::IngestStats;
 /// Cell point limit of the store a reconstruction ingests into its work directory: small
 /// cells, as leaves read the store cells around them through a small cache.
 pub const WORK_STORE_CELL_POINTS: u64 = 1 << 18;
-
-/// Name of that store inside the work directory.
-pub const WORK_STORE: &str = "store";
 
 /// Options of [`ingest`].
 #[derive(Debug, Clone)]
@@ -84,15 +82,6 @@ pub fn ingest(
         None
     };
     staged.commit(normals)
-}
-
-/// What a reconstruction reads its points from.
-#[derive(Debug, Clone)]
-pub enum StoreSource {
-    /// A store made by `ingest`, used as it is.
-    Store(PathBuf),
-    /// Point files, ingested into the work directory first.
-    Points(Vec<InputSpec>),
 }
 
 /// Open the store of `source`: the store itself, or the one ingested from the point files into

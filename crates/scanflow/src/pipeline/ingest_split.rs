@@ -33,9 +33,9 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 
 use serde::{Deserialize, Serialize};
 
-use super::ingest::{IngestParams, IngestStats, StoreSource};
+use super::ingest::{IngestParams, IngestStats};
 use super::shard::{Claims, Shard};
-use super::workdir::{self, RunIdentity};
+use super::workdir::{self, INGEST_DIR, RunIdentity, StoreSource};
 use crate::error::{Error, IoContext, Result};
 use crate::exec::Ctx;
 use crate::fs::atomic::{self, Durability};
@@ -81,9 +81,6 @@ pub const LEAVES_PER_ITEM: usize = 8;
 /// Cells per normals item: one, a cell being up to `--max-cell-points` points of fits (a
 /// task works on as many at once as it has threads).
 pub const CELLS_PER_ITEM: usize = 1;
-
-/// The split ingest's directory inside the work directory.
-pub const INGEST_DIR: &str = "ingest";
 
 /// What a task of a split ingest ended with.
 #[derive(Debug)]

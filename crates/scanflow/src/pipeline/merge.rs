@@ -14,7 +14,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::tiles::{MeshSink, VertexAttrs};
-use super::workdir;
+use super::workdir::{self, MERGE_FILE};
 use crate::error::{Error, Result};
 use crate::exec::Ctx;
 use crate::fs::atomic::{self, Durability};
@@ -23,9 +23,6 @@ use crate::io::preview::Preview;
 use crate::recon::Plan;
 use crate::recon::checkpoint::{read_tile, tile_path};
 use crate::types::{Aabb, demorton3};
-
-/// The description `merge` reads, in the work directory.
-pub const MERGE_FILE: &str = "merge.json";
 
 /// Missing tiles a refused merge names.
 const MISSING_SHOWN: usize = 3;

@@ -16,11 +16,12 @@ use super::merge;
 use super::points::PointSource;
 use super::shard::{Claims, Shard};
 use super::tiles::{self, TileJob};
-use super::workdir::{self, WorkDir};
+use super::workdir::{self, RunIdentity, StoreSource, WorkDir};
 use crate::error::{Error, Result};
 use crate::exec::Ctx;
 use crate::exec::budget::{Permit, Share};
 use crate::io::mesh_write::MeshTarget;
+use crate::normals::{NormalParams, NormalsMode};
 use crate::recon::checkpoint::{
     CellSplat, CoarseCheckpoint, CoarsePartKind, LeafSummary, coarse_part_path, coarse_path,
     leaf_path, read_coarse, read_density_parts, read_leaf_summary, read_splat_parts, write_coarse,
@@ -28,6 +29,7 @@ use crate::recon::checkpoint::{
 };
 use crate::recon::density::{DensityBox, DensityGrid};
 use crate::recon::pou::unit_for;
+use crate::recon::screen::SPARSE_SPACINGS;
 use crate::recon::{
     CoarseField, DEFAULT_ERROR, DEFAULT_MIN_POINTS, LeafDetail, LeafRule, LeafSolvers, Level,
     Moments, Plan, PlanBudget, PointWeight, fft_solve, refine_leaf,
@@ -51,11 +53,15 @@ const POINT_CACHE_MAX_BYTES: u64 = 128 << 20;
 /// The fewest points a solve accepts.
 const MIN_POINTS: u64 = 16;
 
-/// Options of `reconstruct`.
+/// How the field is solved: every option of `reconstruct` that shapes the surface's geometry
+/// (all of them in the run identity, so a resume or merge with others is refused).
 #[derive(Debug, Clone)]
-pub struct ReconParams {
+pub struct SolveParams {
     /// Octree depth: `2^depth` cells per edge of the cube (as PoissonRecon's `--depth`).
     pub depth: u32,
+    /// The deepest the dense coarse solve may be (`--coarse-depth`; `None`: as deep as
+    /// [`crate::recon::plan::levels`] allows); a shallower one adds levels of leaves.
+    pub coarse_depth: Option<u32>,
     /// Gaussian smoothing width (`--smooth`: measured from the samples' precision, or a
     /// fixed width in voxels of each grid), see [`crate::recon::screen::Smoothing`].
     pub smoothing: Smoothing,
@@ -63,50 +69,20 @@ pub struct ReconParams {
     /// voxel; `auto`, also raised for precise samples; or a fixed α, 0: unscreened), see
     /// [`crate::recon::screen`].
     pub point_weight: PointWeight,
-    /// Tile edge in fine voxels (`None`: 64, at least one leaf, at most the cube).
-    pub tile_voxels: Option<u64>,
-    /// The deepest the dense coarse solve may be (`--coarse-depth`; `None`: as deep as
-    /// [`crate::recon::plan::levels`] allows); a shallower one adds levels of leaves.
-    pub coarse_depth: Option<u32>,
-    /// Work directory (leaf checkpoints, run description).
-    pub work_dir: PathBuf,
-    /// Reuse the leaves a previous run with the same inputs and options left in `work_dir`.
-    pub resume: bool,
     /// Error tolerance relative to the bounding-box diagonal: a leaf whose samples lie
     /// within this mean distance of the coarse solution's surface is not refined.
     pub error: f64,
     /// Leaves with fewer points in their cell are not refined.
     pub min_points: u64,
-    /// Leave the surface open where no input point is within two coarse voxels.
-    pub trim: bool,
-    /// Give each vertex its sampling density (input points per square unit, from its
-    /// [`crate::surface::FIT_NEIGHBOURS`] nearest points), written as the PLY's `quality`.
-    pub density: bool,
-    /// Drop the triangles whose corners' mean sampling density is below this (input points
-    /// per square unit): PoissonRecon's trimming by density, as a threshold.
-    pub trim_density: Option<f64>,
-    /// Weigh each sample's normal by its confidence ([`weigh_normals`]).
-    pub confidence: bool,
     /// Refine a leaf only where it holds at least this many samples per fine voxel of a
     /// surface crossing it (PoissonRecon's `--samplesPerNode`): see
-    /// [`ReconParams::least_leaf_points`].
+    /// [`SolveParams::least_leaf_points`].
     pub samples_per_node: Option<f64>,
-    /// Tile fields and marching cubes on the GPU: auto (a real GPU when there is one), on,
-    /// off (the default: the GPU path is not yet measured faster end to end, see
-    /// `extract::gpu`).
-    pub gpu: crate::extract::gpu::GpuMode,
-    /// The leaves' fine solves on the GPU (`recon::gpu_solve`): auto, on, off (the default:
-    /// the CPU's bytes). The mesh differs from the CPU solve's by rounding.
-    pub gpu_solve: crate::extract::gpu::GpuMode,
-    /// Move each vertex onto the plane of its nearest input points (see
-    /// [`crate::surface::FIT_NEIGHBOURS`]).
-    pub fit: bool,
-    /// The slice of the work this process does ([`Shard::ALL`]: all of it, and the mesh; a
-    /// split run leaves the tiles for [`crate::pipeline::merge()`]).
-    pub shard: Shard,
+    /// Weigh each sample's normal by its confidence ([`weigh_normals`]).
+    pub confidence: bool,
 }
 
-impl ReconParams {
+impl SolveParams {
     /// The fewest points a leaf of `leaf_voxels` fine voxels a side must own to be refined:
     /// `--min-points`, or with `--samples-per-node S` at least `S·E²` (a surface crossing a
     /// leaf of edge `E` covers about `E²` fine voxels, so the leaf is refined only where the
@@ -119,39 +95,177 @@ impl ReconParams {
         });
         self.min_points.max(by_density)
     }
+}
 
+/// What is made of the solved field: the vertex fit, trimming, and the densities written.
+#[derive(Debug, Clone)]
+pub struct MeshParams {
+    /// Move each vertex onto the plane of its nearest input points (see
+    /// [`crate::surface::FIT_NEIGHBOURS`]).
+    pub fit: bool,
+    /// Leave the surface open where no input point is within two coarse voxels.
+    pub trim: bool,
+    /// Give each vertex its sampling density (input points per square unit, from its
+    /// [`crate::surface::FIT_NEIGHBOURS`] nearest points), written as the PLY's `quality`.
+    pub density: bool,
+    /// Drop the triangles whose corners' mean sampling density is below this (input points
+    /// per square unit): PoissonRecon's trimming by density, as a threshold.
+    pub trim_density: Option<f64>,
+}
+
+impl MeshParams {
+    /// Whether the vertices' sampling densities are measured (written or trimmed by).
+    pub fn measures_density(&self) -> bool {
+        self.density || self.trim_density.is_some()
+    }
+}
+
+/// How the run is carried out: its work directory, resume, its shard of a split run, the
+/// tiles' size and the devices. None changes the CPU path's bytes; the GPU's solve changes
+/// them by rounding and is part of the run identity.
+#[derive(Debug, Clone)]
+pub struct RunParams {
+    /// Work directory (leaf checkpoints, run description).
+    pub work_dir: PathBuf,
+    /// Reuse the leaves a previous run with the same inputs and options left in `work_dir`.
+    pub resume: bool,
+    /// The slice of the work this process does ([`Shard::ALL`]: all of it, and the mesh; a
+    /// split run leaves the tiles for [`crate::pipeline::merge()`]).
+    pub shard: Shard,
+    /// Tile edge in fine voxels (`None`: 64, at least one leaf, at most the cube).
+    pub tile_voxels: Option<u64>,
+    /// Tile fields and marching cubes on the GPU: auto (a real GPU when there is one), on,
+    /// off (the default: the GPU path is not yet measured faster end to end, see
+    /// `extract::gpu`).
+    pub gpu: crate::extract::gpu::GpuMode,
+    /// The leaves' fine solves on the GPU (`recon::gpu_solve`): auto, on, off (the default:
+    /// the CPU's bytes). The mesh differs from the CPU solve's by rounding.
+    pub gpu_solve: crate::extract::gpu::GpuMode,
+}
+
+impl RunParams {
     /// Whether checkpoints found in the work directory are reused: by a resumed run, and by
     /// every shard of a split run (another shard's work).
     pub fn reuses_checkpoints(&self) -> bool {
         self.resume || self.shard.is_split()
     }
+}
 
-    /// Whether the vertices' sampling densities are measured (written or trimmed by).
-    pub fn measures_density(&self) -> bool {
-        self.density || self.trim_density.is_some()
+/// Options of `reconstruct`: the solver's, the mesh's and the run's.
+#[derive(Debug, Clone)]
+pub struct ReconParams {
+    /// How the field is solved.
+    pub solve: SolveParams,
+    /// What is made of the field.
+    pub mesh: MeshParams,
+    /// How the run is carried out.
+    pub run: RunParams,
+}
+
+impl ReconParams {
+    /// The identity of reconstructing `source` with these options; reads each input's
+    /// fingerprint (see [`workdir`]'s module docs).
+    pub fn identity(
+        &self,
+        source: &StoreSource,
+        normals: NormalsMode,
+        normal_params: &NormalParams,
+    ) -> Result<RunIdentity> {
+        let params = self;
+        let options = [
+            ("command", "reconstruct".to_string()),
+            ("--depth", params.solve.depth.to_string()),
+            // The measured width's and weight's rules are part of it: a run before the sparse
+            // floor (`recon::screen::sparse_floor_voxels`) solved sparse samples otherwise,
+            // and one before the noise of close pairs (`NoiseStats::pair_sigma_voxels`)
+            // weighed and smoothed noisy relief otherwise, as one before those pairs were cut
+            // (`PairStats::nugget`) did folded relief (their coarse checkpoints are of older
+            // formats too).
+            (
+                "--smooth",
+                match params.solve.smoothing {
+                    Smoothing::Measured => format!(
+                        "measured, narrowed by the noise's share of the quadrics' residual, \
+                         at least {SPARSE_SPACINGS} of the samples' spacing"
+                    ),
+                    fixed => fixed.to_string(),
+                },
+            ),
+            (
+                "--point-weight",
+                format!(
+                    "{}, noise from close pairs cut at {} spreads, the relief's share from {} \
+                     voxel of noise to {}",
+                    params.solve.point_weight,
+                    crate::recon::screen::PAIR_TRIM_SIGMAS,
+                    crate::surface::fit::FIT_NOISE_LIMIT_VOXELS,
+                    crate::recon::screen::NOISE_DOMINANT_VOXELS
+                ),
+            ),
+            ("--error", params.solve.error.to_string()),
+            ("--min-points", params.solve.min_points.to_string()),
+            ("--trim", params.mesh.trim.to_string()),
+            (
+                "--no-fit",
+                match params.mesh.fit {
+                    true => format!(
+                        "false, none from {} voxel of noise, noisy samples' misfit by half",
+                        crate::surface::fit::FIT_NOISE_LIMIT_VOXELS
+                    ),
+                    false => "true".to_string(),
+                },
+            ),
+            (
+                "--gpu-solve",
+                crate::recon::gpu_solve::device_identity(params.run.gpu_solve)?,
+            ),
+            ("--density", params.mesh.density.to_string()),
+            ("--confidence", params.solve.confidence.to_string()),
+            (
+                "--samples-per-node",
+                params
+                    .solve
+                    .samples_per_node
+                    .map_or_else(|| "none".to_string(), |s| s.to_string()),
+            ),
+            (
+                "--trim-density",
+                params
+                    .mesh
+                    .trim_density
+                    .map_or_else(|| "none".to_string(), |d| d.to_string()),
+            ),
+        ];
+        RunIdentity::with_options(source, normals, normal_params, &options)
     }
 
     /// Defaults for `depth` with work directory `work_dir`.
     pub fn new(depth: u32, work_dir: PathBuf) -> ReconParams {
         ReconParams {
-            depth,
-            smoothing: Smoothing::Measured,
-            point_weight: PointWeight::Standard,
-            fit: true,
-            tile_voxels: None,
-            coarse_depth: None,
-            work_dir,
-            resume: false,
-            error: DEFAULT_ERROR,
-            min_points: DEFAULT_MIN_POINTS,
-            trim: false,
-            density: false,
-            trim_density: None,
-            confidence: false,
-            samples_per_node: None,
-            gpu: crate::extract::gpu::GpuMode::Off,
-            gpu_solve: crate::extract::gpu::GpuMode::Off,
-            shard: Shard::ALL,
+            solve: SolveParams {
+                depth,
+                coarse_depth: None,
+                smoothing: Smoothing::Measured,
+                point_weight: PointWeight::Standard,
+                error: DEFAULT_ERROR,
+                min_points: DEFAULT_MIN_POINTS,
+                samples_per_node: None,
+                confidence: false,
+            },
+            mesh: MeshParams {
+                fit: true,
+                trim: false,
+                density: false,
+                trim_density: None,
+            },
+            run: RunParams {
+                work_dir,
+                resume: false,
+                shard: Shard::ALL,
+                tile_voxels: None,
+                gpu: crate::extract::gpu::GpuMode::Off,
+                gpu_solve: crate::extract::gpu::GpuMode::Off,
+            },
         }
     }
 }
@@ -300,12 +414,12 @@ pub fn reconstruct(
     ctx: &Ctx,
 ) -> Result<ReconStats> {
     let t0 = Instant::now();
-    if params.shard.is_split() {
+    if params.run.shard.is_split() {
         // Other tasks, maybe on other hosts, write into the same work directory.
         crate::fs::atomic::tag_temps_with_host();
     }
     let mut levels = plan_run(store, params, ctx)?;
-    let dirs = workdir::prepare(store, &levels, params)?;
+    let dirs = workdir::prepare(store, &levels, &params.run)?;
     let top = *levels.last().expect("a plan has a level");
     let coarse = coarse_or_checkpoint(store, &levels[0], &top, params, &dirs, ctx)?;
     // The weight the coarse solve used, for every leaf (`auto` measures it there); the
@@ -385,8 +499,9 @@ pub fn reconstruct(
     )?;
     let m = &store.manifest;
     let (with_color, with_intensity) = (m.attributes.color, m.attributes.intensity);
-    let points = (with_color || with_intensity || params.fit || params.measures_density())
-        .then(|| Mutex::new(src.for_positions()));
+    let points =
+        (with_color || with_intensity || params.mesh.fit || params.mesh.measures_density())
+            .then(|| Mutex::new(src.for_positions()));
     let job = TileJob {
         plan: &plan,
         params,
@@ -404,17 +519,17 @@ pub fn reconstruct(
         bounds: m.bounds,
     };
     let nonempty = tiles::nonempty_tiles(&job, &ctx.pool)?;
-    let split = params.shard.is_split();
+    let split = params.run.shard.is_split();
     if split {
         // What `merge` welds; every shard writes the same description.
         merge::describe(
-            &params.work_dir,
+            &params.run.work_dir,
             &merge::MergeDescription {
                 plan,
                 iso: leaves.iso,
                 with_color,
                 with_intensity,
-                with_density: params.density,
+                with_density: params.mesh.density,
                 input: store.dir.clone(),
                 bounds: m.bounds,
                 tiles: nonempty.clone(),
@@ -509,7 +624,7 @@ fn plan_run(store: &Store, params: &ReconParams, ctx: &Ctx) -> Result<Vec<Plan>>
             ),
         ));
     }
-    if params.confidence && !m.attributes.confidence && m.estimated_normals.is_some() {
+    if params.solve.confidence && !m.attributes.confidence && m.estimated_normals.is_some() {
         return Err(Error::input(
             &store.dir,
             "--confidence: the points carry no confidence (a PLY vertex property \"confidence\") and their normals were estimated (unit length), so there is nothing to weigh them by",
@@ -517,19 +632,19 @@ fn plan_run(store: &Store, params: &ReconParams, ctx: &Ctx) -> Result<Vec<Plan>>
     }
     let mut levels = crate::recon::plan::levels(
         m.cube,
-        params.depth,
+        params.solve.depth,
         // Before the noise is measured `measured` is the widest: the width is the solves'
         // alone, set by the coarse pass with the weight.
-        params.smoothing.voxels(&NoiseStats::default(), None),
+        params.solve.smoothing.voxels(&NoiseStats::default(), None),
         // Before the noise is measured `standard` and `auto` are the base weight: the grids
         // are sized for a screened solve, and the coarse pass sets the weight (never to 0).
-        params.point_weight.alpha(&NoiseStats::default()),
-        params.tile_voxels,
-        params.coarse_depth,
+        params.solve.point_weight.alpha(&NoiseStats::default()),
+        params.run.tile_voxels,
+        params.solve.coarse_depth,
         plan_budget(ctx.budget.total()),
     )?;
     for p in &mut levels {
-        p.confidence = params.confidence;
+        p.confidence = params.solve.confidence;
     }
     Ok(levels)
 }
@@ -711,15 +826,15 @@ fn over_cells<P: Send>(
         }
         Ok(())
     };
-    if !params.shard.is_split() {
+    if !params.run.shard.is_split() {
         return run(0..store.manifest.cells.len(), &mut add);
     }
     let chunks = coarse_chunks(store);
     let claims = Claims::new(&dirs.claims);
     let path = |c: usize| coarse_part_path(&dirs.leaves, how.kind, c);
     let mut here = 0;
-    for &claiming in params.shard.passes() {
-        for c in params.shard.order(chunks.len()) {
+    for &claiming in params.run.shard.passes() {
+        for c in params.run.shard.order(chunks.len()) {
             if path(c).exists()
                 || (claiming && !claims.take(&format!("{}-{c}", how.kind.name()))?)
             {
@@ -931,7 +1046,7 @@ fn coarse_pass(
     stage.finish(None);
     moments.check_not_flat(&store.dir)?;
     let stage = ctx.progress.stage("coarse", None, "solves");
-    let point_weight = params.point_weight.alpha(&noise);
+    let point_weight = params.solve.point_weight.alpha(&noise);
     let sigma_vox = smoothing_on(
         params,
         &noise,
@@ -964,7 +1079,7 @@ fn coarse_pass(
 /// The Gaussian's width for a grid of spacing `h` (input units), in its voxels: `--smooth`
 /// for samples of the measured `noise` lying `spacing` apart (input units).
 fn smoothing_on(params: &ReconParams, noise: &NoiseStats, spacing: Option<f64>, h: f64) -> f64 {
-    params.smoothing.voxels(noise, spacing.map(|s| s / h))
+    params.solve.smoothing.voxels(noise, spacing.map(|s| s / h))
 }
 
 /// The coarse pass ([`coarse_pass`]) checkpointed in the work directory; or, where a resumed
@@ -982,6 +1097,7 @@ fn coarse_or_checkpoint(
 ) -> Result<CoarsePass> {
     let path = coarse_path(&dirs.leaves);
     let found = params
+        .run
         .reuses_checkpoints()
         .then(|| read_coarse(&path))
         .transpose()?
@@ -1111,13 +1227,13 @@ fn leaf_pass(
     let (mut solved, mut iterations) = (0, 0u64);
     let mut read = SampleReads::default();
     let rule = LeafRule {
-        tolerance: params.error * store.manifest.bounds.diagonal(),
-        min_points: params.least_leaf_points(plan.leaf_voxels),
+        tolerance: params.solve.error * store.manifest.bounds.diagonal(),
+        min_points: params.solve.least_leaf_points(plan.leaf_voxels),
     };
-    let solvers = LeafSolvers::new(plan).with_gpu(params.gpu_solve)?;
-    let reuse = params.reuses_checkpoints();
+    let solvers = LeafSolvers::new(plan).with_gpu(params.run.gpu_solve)?;
+    let reuse = params.run.reuses_checkpoints();
     let claims = Claims::new(&dirs.claims);
-    let order = params.shard.order(leaves.len());
+    let order = params.run.shard.order(leaves.len());
     let mut outcomes: Vec<Option<(f64, u64, bool)>> = vec![None; leaves.len()];
     // With the fine solves on a GPU a worker waits for its leaf's batch (a third of its time
     // on an H100 with 16 cores): twice the workers keep the cores busy meanwhile, and more
@@ -1132,7 +1248,7 @@ fn leaf_pass(
     let wave = 2 * workers;
     // Room for a whole wave of solves and its points (as much as twice the plan's cache).
     let reads = src.begin_pass(workers as u64 * fine_bytes, ctx);
-    for &claiming in params.shard.passes() {
+    for &claiming in params.run.shard.passes() {
         let mut next = 0;
         loop {
             let mut wave_idx = Vec::with_capacity(wave);

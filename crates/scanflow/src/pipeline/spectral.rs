@@ -15,6 +15,7 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
+use super::workdir::{PATCHES as PATCHES_DIR, RESAMPLED};
 use crate::error::{Error, IoContext, Result};
 use crate::exec::Ctx;
 use crate::exec::budget::Share;
@@ -44,13 +45,6 @@ pub const MIN_CACHE_BYTES: u64 = 16 << 20;
 
 /// Cells per worker thread in a wave.
 const CELLS_PER_THREAD: usize = 2;
-
-/// Name of the patch checkpoints' directory inside the work directory.
-pub const PATCHES_DIR: &str = "patches";
-
-/// Name of the file resampled points wait in (inside the work directory) until their count,
-/// which the output's header needs, is known.
-pub const RESAMPLED: &str = "resampled.bin";
 
 /// Options of a spectral run.
 #[derive(Debug, Clone)]

@@ -112,7 +112,7 @@ pub fn run(
     ctx: &Ctx,
 ) -> Result<TileStats> {
     let plan = job.plan;
-    let shard = job.params.shard;
+    let shard = job.params.run.shard;
     // The tiles work relative to the cube's lower corner (on its lattice, `types::Cube`), so
     // that translated inputs give the same numbers; the writer adds the corner back.
     let geom = GridGeom {
@@ -120,7 +120,7 @@ pub fn run(
         h: plan.spacing,
         n: plan.fine_cells,
     };
-    let mut gpu = GpuExtractor::new(job.params.gpu)?;
+    let mut gpu = GpuExtractor::new(job.params.run.gpu)?;
     if let Some(g) = &gpu {
         log::info!("extracting tiles on the GPU: {}", g.adapter_name());
     }
@@ -131,7 +131,7 @@ pub fn run(
             VertexAttrs {
                 color: job.with_color,
                 intensity: job.with_intensity,
-                density: job.params.density,
+                density: job.params.mesh.density,
             },
             out,
         )?),
@@ -230,7 +230,7 @@ pub fn run(
     Ok(match sink {
         Some(sink) => TileStats {
             tiles: tiles_done,
-            ..sink.finish(job.input, job.iso, job.params.depth, ctx)?
+            ..sink.finish(job.input, job.iso, job.params.solve.depth, ctx)?
         },
         None => TileStats {
             vertices: 0,
@@ -520,7 +520,7 @@ fn next_wave(
     free: u64,
 ) -> Result<(Vec<WaveTile>, u64)> {
     let plan = job.plan;
-    let split = job.params.shard.is_split();
+    let split = job.params.run.shard.is_split();
     let mut wave_tiles = Vec::new();
     let mut leaves = HashSet::new();
     let mut bytes = 0u64;
@@ -600,7 +600,7 @@ fn load_wave(
     let plan = job.plan;
     let done: Vec<bool> = wave_tiles
         .iter()
-        .map(|w| job.params.resume && tile_path(job.tiles_dir, w.0).exists())
+        .map(|w| job.params.run.resume && tile_path(job.tiles_dir, w.0).exists())
         .collect();
     let todo: Vec<&WaveTile> = wave_tiles
         .iter()
@@ -655,15 +655,15 @@ fn finish_tile(
     mut mesh: TileMesh,
     cp: &Option<NearPoints>,
 ) -> Result<(u64, TileMesh)> {
-    if job.params.trim {
+    if job.params.mesh.trim {
         trim_mesh(&mut mesh, |c| job.support.near(c));
     }
     if let Some(cp) = cp {
         fit_tile(job, points, &mut mesh, cp)?;
     }
-    if let Some(least) = job.params.trim_density {
+    if let Some(least) = job.params.mesh.trim_density {
         trim_by_density(&mut mesh, least);
-        if !job.params.density {
+        if !job.params.mesh.density {
             mesh.density.clear();
         }
     }
@@ -683,6 +683,7 @@ fn fit_tile(
     // The fit, with the samples' measured noise in input units (0 where unknown).
     let fit = job
         .params
+        .mesh
         .fit
         .then(|| job.plan.fit_noise_voxels.unwrap_or(0.0) * h);
     // The tile meshes' frame: offsets from the cube's corner (see `to_local`).
@@ -691,7 +692,7 @@ fn fit_tile(
         h,
         n: job.plan.fine_cells,
     };
-    let density = job.params.measures_density();
+    let density = job.params.mesh.measures_density();
     let (mut fits, inexact) = cp.fit_vertices(&mesh.positions, &mesh.keys, &geom, fit, density);
     // Vertices whose neighbours may lie beyond the gathered box: their true neighbours lie
     // within their current farthest one, so one wider gather, of the points within the

@@ -31,15 +31,12 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use super::ingest::{StoreSource, WORK_STORE};
-use super::ingest_split::INGEST_DIR;
-use super::merge::MERGE_FILE;
-use super::reconstruct::ReconParams;
+use super::reconstruct::RunParams;
 use crate::error::{Error, IoContext, Result};
 use crate::fs::atomic::{self, Durability};
+use crate::io::InputSpec;
 use crate::normals::{NormalParams, NormalsMode};
-use crate::recon::screen::SPARSE_SPACINGS;
-use crate::recon::{Plan, Smoothing};
+use crate::recon::Plan;
 use crate::store::Store;
 use crate::store::manifest::MANIFEST;
 
@@ -70,10 +67,20 @@ pub fn tiles_dir(dir: &Path) -> PathBuf {
 }
 
 /// Spectral patch checkpoints.
-const PATCHES: &str = crate::pipeline::spectral::PATCHES_DIR;
+pub const PATCHES: &str = "patches";
 
-/// Resampled points waiting for their count to be known.
-const RESAMPLED: &str = crate::pipeline::spectral::RESAMPLED;
+/// The file resampled points wait in until their count, which the output's header needs, is
+/// known.
+pub const RESAMPLED: &str = "resampled.bin";
+
+/// The store a reconstruction ingests its point files into.
+pub const WORK_STORE: &str = "store";
+
+/// The split ingest's directory.
+pub const INGEST_DIR: &str = "ingest";
+
+/// The description `merge` reads.
+pub const MERGE_FILE: &str = "merge.json";
 
 /// Windows read for an input's fingerprint.
 const FINGERPRINT_WINDOWS: u64 = 16;
@@ -110,6 +117,15 @@ pub fn is_work_dir(dir: &Path) -> bool {
     dir.join(MARKER).is_file()
 }
 
+/// What a reconstruction reads its points from.
+#[derive(Debug, Clone)]
+pub enum StoreSource {
+    /// A store made by `ingest`, used as it is.
+    Store(PathBuf),
+    /// Point files, ingested into the work directory first.
+    Points(Vec<InputSpec>),
+}
+
 /// What a run is made of: inputs, options and version, as `name → value` pairs.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 pub struct RunIdentity {
@@ -117,79 +133,6 @@ pub struct RunIdentity {
 }
 
 impl RunIdentity {
-    /// The identity of reconstructing `source` with these options; reads each input's
-    /// fingerprint (see the [module docs](self)).
-    pub fn new(
-        source: &StoreSource,
-        normals: NormalsMode,
-        normal_params: &NormalParams,
-        params: &ReconParams,
-    ) -> Result<RunIdentity> {
-        let options = [
-            ("command", "reconstruct".to_string()),
-            ("--depth", params.depth.to_string()),
-            // The measured width's and weight's rules are part of it: a run before the sparse
-            // floor (`recon::screen::sparse_floor_voxels`) solved sparse samples otherwise,
-            // and one before the noise of close pairs (`NoiseStats::pair_sigma_voxels`)
-            // weighed and smoothed noisy relief otherwise, as one before those pairs were cut
-            // (`PairStats::nugget`) did folded relief (their coarse checkpoints are of older
-            // formats too).
-            (
-                "--smooth",
-                match params.smoothing {
-                    Smoothing::Measured => format!(
-                        "measured, narrowed by the noise's share of the quadrics' residual, \
-                         at least {SPARSE_SPACINGS} of the samples' spacing"
-                    ),
-                    fixed => fixed.to_string(),
-                },
-            ),
-            (
-                "--point-weight",
-                format!(
-                    "{}, noise from close pairs cut at {} spreads, the relief's share from {} \
-                     voxel of noise to {}",
-                    params.point_weight,
-                    crate::recon::screen::PAIR_TRIM_SIGMAS,
-                    crate::surface::fit::FIT_NOISE_LIMIT_VOXELS,
-                    crate::recon::screen::NOISE_DOMINANT_VOXELS
-                ),
-            ),
-            ("--error", params.error.to_string()),
-            ("--min-points", params.min_points.to_string()),
-            ("--trim", params.trim.to_string()),
-            (
-                "--no-fit",
-                match params.fit {
-                    true => format!(
-                        "false, none from {} voxel of noise, noisy samples' misfit by half",
-                        crate::surface::fit::FIT_NOISE_LIMIT_VOXELS
-                    ),
-                    false => "true".to_string(),
-                },
-            ),
-            (
-                "--gpu-solve",
-                crate::recon::gpu_solve::device_identity(params.gpu_solve)?,
-            ),
-            ("--density", params.density.to_string()),
-            ("--confidence", params.confidence.to_string()),
-            (
-                "--samples-per-node",
-                params
-                    .samples_per_node
-                    .map_or_else(|| "none".to_string(), |s| s.to_string()),
-            ),
-            (
-                "--trim-density",
-                params
-                    .trim_density
-                    .map_or_else(|| "none".to_string(), |d| d.to_string()),
-            ),
-        ];
-        RunIdentity::with_options(source, normals, normal_params, &options)
-    }
-
     /// The identity of a run of any command: its inputs, the normal options when it ingests
     /// them, and `options`, every option that changes its output.
     pub fn with_options(
@@ -494,7 +437,7 @@ pub struct WorkDir {
 /// [`crate::recon::plan::levels`]) on `store`: record them; when the checkpoints there were
 /// made with other levels or another store (a resume with another `--mem` or `--tile`), drop
 /// them, as no leaf of theirs fits this plan.
-pub fn prepare(store: &Store, levels: &[Plan], params: &ReconParams) -> Result<WorkDir> {
+pub fn prepare(store: &Store, levels: &[Plan], params: &RunParams) -> Result<WorkDir> {
     let m = &store.manifest;
     let info = SolveInfo {
         store_points: m.point_count,
