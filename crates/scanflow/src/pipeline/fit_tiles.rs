@@ -29,6 +29,7 @@ use rayon::prelude::*;
 use super::fit::{FitJob, FitStats, Surface};
 use crate::error::{Error, IoContext, Result};
 use crate::exec::Ctx;
+use crate::exec::progress::Stage;
 use crate::spline::block::solve_block;
 use crate::spline::fit::{Fairness, Fit, FitReport, Missed, OMEGA_FLOOR, Refine};
 use crate::spline::hier::{Hierarchy, Leaf};
@@ -232,6 +233,162 @@ fn owners(h: &Hierarchy, tl: &Tiling) -> Vec<Vec<u32>> {
     out
 }
 
+/// What every pass over the tiles of a terrain fit shares.
+struct TileFit<'a> {
+    store: &'a Store,
+    tl: &'a Tiling,
+    /// The tiles' bucketed points.
+    dir: &'a Path,
+    /// Each tile's points: own and halo.
+    counts: &'a [[u64; 2]],
+    ctx: &'a Ctx,
+}
+
+impl TileFit<'_> {
+    /// [`SWEEPS`] sweeps of block Gauss–Seidel over the tiles: each tile's own coefficients
+    /// solved against its points and halo, the others held (`rpiece_of`: the reference piece
+    /// of data-dependent fairness, for a tile).
+    fn sweeps(
+        &self,
+        h: &Hierarchy,
+        coef: &mut [[f64; 3]],
+        omega: f64,
+        rpiece_of: impl Fn([i64; 2]) -> Option<TensorSurface>,
+        stage: &Stage,
+    ) -> Result<()> {
+        let own = owners(h, self.tl);
+        let mut local = vec![u32::MAX; h.len()];
+        for _ in 0..SWEEPS {
+            for t in 0..self.tl.count() {
+                let ti = [t as i64 % self.tl.tiles[0], t as i64 / self.tl.tiles[0]];
+                let m = self.counts[t][0] + self.counts[t][1];
+                let _permit = self.ctx.budget.acquire(
+                    m * BYTES_PER_TILE_POINT + own[t].len() as u64 * BYTES_PER_COEF,
+                    "one tile's points and block system",
+                )?;
+                let pts = read_tile(self.dir, t, true)?;
+                let uv: Vec<[f64; 2]> = pts.iter().map(|&p| self.tl.uv(p)).collect();
+                let rect = self.tl.rect(ti, self.tl.halo());
+                let rpiece = rpiece_of(ti);
+                self.ctx
+                    .pool
+                    .install(|| {
+                        solve_block(
+                            h,
+                            coef,
+                            &own[t],
+                            &mut local,
+                            &pts,
+                            &uv,
+                            rect,
+                            omega,
+                            rpiece.as_ref(),
+                        )
+                    })
+                    .map_err(|e| Error::input(&self.store.dir, e.to_string()))?;
+                stage.inc(1);
+            }
+        }
+        Ok(())
+    }
+
+    /// Distances of every tile's own points to its piece, and the leaves that miss
+    /// `tolerance`: `(missing leaves, per tile (max, sum of squares, points), per tile the
+    /// misses)`.
+    #[allow(clippy::type_complexity)]
+    fn measure(
+        &self,
+        h: &Hierarchy,
+        coef: &[[f64; 3]],
+        tolerance: f64,
+    ) -> Result<(Vec<Leaf>, Vec<(f64, f64, u64)>, Vec<Vec<Missed>>)> {
+        let nt = self.tl.count();
+        // Distances of every tile's own points to its piece, and the leaves that miss.
+        let mut bad: Vec<Leaf> = Vec::new();
+        let mut dist: Vec<(f64, f64, u64)> = Vec::with_capacity(nt);
+        let mut missed: Vec<Vec<Missed>> = Vec::with_capacity(nt);
+        for t in 0..nt {
+            let ti = [t as i64 % self.tl.tiles[0], t as i64 / self.tl.tiles[0]];
+            let pts = read_tile(self.dir, t, false)?;
+            let s = piece(h, coef, self.tl, ti, 0);
+            let d: Vec<([f64; 2], f64)> = self.ctx.pool.install(|| {
+                pts.par_iter()
+                    .map(|&p| tensor::project(&s, p, self.tl.uv(p)))
+                    .collect()
+            });
+            let mut m = BTreeMap::new();
+            let (mut max, mut sq) = (0.0f64, 0.0f64);
+            for ((q, dd), p) in d.iter().zip(&pts) {
+                max = max.max(*dd);
+                sq += dd * dd;
+                if *dd > tolerance {
+                    let leaf = h.leaf_of(*q);
+                    bad.push(leaf);
+                    note_missed(&mut m, h, leaf, *p, *dd, self.tl);
+                }
+            }
+            dist.push((max, sq, pts.len() as u64));
+            missed.push(m.into_values().collect());
+        }
+        Ok((bad, dist, missed))
+    }
+
+    /// Each tile's exported piece with its report; `run` is `(iterations, omega, tolerance)`.
+    fn surfaces(
+        &self,
+        h: &Hierarchy,
+        coef: &[[f64; 3]],
+        dist: &[(f64, f64, u64)],
+        missed: &[Vec<Missed>],
+        run: (usize, f64, f64),
+    ) -> Vec<Surface> {
+        let (iterations, omega, tolerance) = run;
+        let nt = self.tl.count();
+        let own = owners(h, self.tl);
+        let mut surfaces = Vec::with_capacity(nt);
+        for t in 0..nt {
+            let ti = [t as i64 % self.tl.tiles[0], t as i64 / self.tl.tiles[0]];
+            let mut s = piece(h, coef, self.tl, ti, 0);
+            for c in &mut s.ctrl {
+                for x in 0..3 {
+                    c[x] += self.tl.centre[x];
+                }
+            }
+            let mut per_level = vec![0usize; h.levels()];
+            for &f in &own[t] {
+                per_level[level_of(h, f)] += 1;
+            }
+            let (max, sq, m) = dist[t];
+            let report = FitReport {
+                control_points: own[t].len(),
+                per_level,
+                tensor_control_points: s.ctrl.len(),
+                max_deviation: max,
+                rms_deviation: (sq / m.max(1) as f64).sqrt(),
+                max_residual: f64::NAN,
+                fairness_energy: f64::NAN,
+                iterations,
+                omega,
+                met: max <= tolerance,
+                missed: missed[t].clone(),
+            };
+            surfaces.push(Surface {
+                fit: Fit {
+                    surface: s,
+                    report,
+                    foot: Vec::new(),
+                    distance: Vec::new(),
+                },
+                points: m as usize,
+                from_triangles: false,
+                flips: 0,
+                secs: [0.0, 0.0],
+            });
+        }
+        surfaces
+    }
+}
+
 /// Fits the store as terrain, tile by tile; writes nothing (the caller writes the outputs).
 pub fn fit_tiles(store: &Store, work: &Path, job: &FitJob, ctx: &Ctx) -> Result<FitStats> {
     let t0 = Instant::now();
@@ -280,72 +437,22 @@ pub fn fit_tiles(store: &Store, work: &Path, job: &FitJob, ctx: &Ctx) -> Result<
     let mut iterations = 0;
     let mut reference: Option<Hierarchy> = None;
     let mut ref_coef: Vec<[f64; 3]> = Vec::new();
-    let nt = tl.count();
     let stage = ctx.progress.stage("fit", None, "tile solves");
+    let fit = TileFit {
+        store,
+        tl: &tl,
+        dir: &dir,
+        counts: &counts,
+        ctx,
+    };
     let (dist, missed) = loop {
         iterations += 1;
-        let own = owners(&h, &tl);
-        let mut local = vec![u32::MAX; h.len()];
-        for _ in 0..SWEEPS {
-            for t in 0..nt {
-                let ti = [t as i64 % tl.tiles[0], t as i64 / tl.tiles[0]];
-                let m = counts[t][0] + counts[t][1];
-                let _permit = ctx.budget.acquire(
-                    m * BYTES_PER_TILE_POINT + own[t].len() as u64 * BYTES_PER_COEF,
-                    "one tile's points and block system",
-                )?;
-                let pts = read_tile(&dir, t, true)?;
-                let uv: Vec<[f64; 2]> = pts.iter().map(|&p| tl.uv(p)).collect();
-                let rect = tl.rect(ti, tl.halo());
-                let rpiece = match (job.fit.fairness, &reference) {
-                    (Fairness::Data, Some(r)) => Some(piece(r, &ref_coef, &tl, ti, 2)),
-                    _ => None,
-                };
-                ctx.pool
-                    .install(|| {
-                        solve_block(
-                            &h,
-                            &mut coef,
-                            &own[t],
-                            &mut local,
-                            &pts,
-                            &uv,
-                            rect,
-                            omega,
-                            rpiece.as_ref(),
-                        )
-                    })
-                    .map_err(|e| Error::input(&store.dir, e.to_string()))?;
-                stage.inc(1);
-            }
-        }
-        // Distances of every tile's own points to its piece, and the leaves that miss.
-        let mut bad: Vec<Leaf> = Vec::new();
-        let mut dist: Vec<(f64, f64, u64)> = Vec::with_capacity(nt);
-        let mut missed: Vec<Vec<Missed>> = Vec::with_capacity(nt);
-        for t in 0..nt {
-            let ti = [t as i64 % tl.tiles[0], t as i64 / tl.tiles[0]];
-            let pts = read_tile(&dir, t, false)?;
-            let s = piece(&h, &coef, &tl, ti, 0);
-            let d: Vec<([f64; 2], f64)> = ctx.pool.install(|| {
-                pts.par_iter()
-                    .map(|&p| tensor::project(&s, p, tl.uv(p)))
-                    .collect()
-            });
-            let mut m = BTreeMap::new();
-            let (mut max, mut sq) = (0.0f64, 0.0f64);
-            for ((q, dd), p) in d.iter().zip(&pts) {
-                max = max.max(*dd);
-                sq += dd * dd;
-                if *dd > tolerance {
-                    let leaf = h.leaf_of(*q);
-                    bad.push(leaf);
-                    note_missed(&mut m, &h, leaf, *p, *dd, &tl);
-                }
-            }
-            dist.push((max, sq, pts.len() as u64));
-            missed.push(m.into_values().collect());
-        }
+        let rpiece_of = |ti| match (job.fit.fairness, &reference) {
+            (Fairness::Data, Some(r)) => Some(piece(r, &ref_coef, &tl, ti, 2)),
+            _ => None,
+        };
+        fit.sweeps(&h, &mut coef, omega, rpiece_of, &stage)?;
+        let (mut bad, dist, missed) = fit.measure(&h, &coef, tolerance)?;
         bad.sort_unstable();
         bad.dedup();
         if bad.is_empty() || iterations >= max_iter {
@@ -368,47 +475,7 @@ pub fn fit_tiles(store: &Store, work: &Path, job: &FitJob, ctx: &Ctx) -> Result<
         coef = old.prolong(&coef, &h);
     };
     stage.finish(None);
-    let own = owners(&h, &tl);
-    let mut surfaces = Vec::with_capacity(nt);
-    for t in 0..nt {
-        let ti = [t as i64 % tl.tiles[0], t as i64 / tl.tiles[0]];
-        let mut s = piece(&h, &coef, &tl, ti, 0);
-        for c in &mut s.ctrl {
-            for x in 0..3 {
-                c[x] += tl.centre[x];
-            }
-        }
-        let mut per_level = vec![0usize; h.levels()];
-        for &f in &own[t] {
-            per_level[level_of(&h, f)] += 1;
-        }
-        let (max, sq, m) = dist[t];
-        let report = FitReport {
-            control_points: own[t].len(),
-            per_level,
-            tensor_control_points: s.ctrl.len(),
-            max_deviation: max,
-            rms_deviation: (sq / m.max(1) as f64).sqrt(),
-            max_residual: f64::NAN,
-            fairness_energy: f64::NAN,
-            iterations,
-            omega,
-            met: max <= tolerance,
-            missed: missed[t].clone(),
-        };
-        surfaces.push(Surface {
-            fit: Fit {
-                surface: s,
-                report,
-                foot: Vec::new(),
-                distance: Vec::new(),
-            },
-            points: m as usize,
-            from_triangles: false,
-            flips: 0,
-            secs: [0.0, 0.0],
-        });
-    }
+    let surfaces = fit.surfaces(&h, &coef, &dist, &missed, (iterations, omega, tolerance));
     let seam = seam_gap(&surfaces, &tl);
     Ok(FitStats {
         surfaces,

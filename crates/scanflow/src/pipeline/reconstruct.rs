@@ -20,6 +20,7 @@ use super::workdir::{self, RunIdentity, StoreSource, WorkDir};
 use crate::error::{Error, Result};
 use crate::exec::Ctx;
 use crate::exec::budget::{Permit, Share};
+use crate::exec::progress::Stage;
 use crate::io::mesh_write::MeshTarget;
 use crate::normals::{NormalParams, NormalsMode};
 use crate::recon::checkpoint::{
@@ -31,8 +32,8 @@ use crate::recon::density::{DensityBox, DensityGrid};
 use crate::recon::pou::unit_for;
 use crate::recon::screen::SPARSE_SPACINGS;
 use crate::recon::{
-    CoarseField, DEFAULT_ERROR, DEFAULT_MIN_POINTS, LeafDetail, LeafRule, LeafSolvers, Level,
-    Moments, Plan, PlanBudget, PointWeight, fft_solve, refine_leaf,
+    CoarseField, DEFAULT_ERROR, DEFAULT_MIN_POINTS, LeafDetail, LeafPoints, LeafRule, LeafSolvers,
+    Level, Moments, Plan, PlanBudget, PointWeight, fft_solve, refine_leaf,
     screen::{
         self, NOISE_KEY_BYTES, NoiseStats, SCREEN_PART_ENTRY_BYTES, ScreenBuilder, Smoothing,
     },
@@ -422,21 +423,8 @@ pub fn reconstruct(
     let dirs = workdir::prepare(store, &levels, &params.run)?;
     let top = *levels.last().expect("a plan has a level");
     let coarse = coarse_or_checkpoint(store, &levels[0], &top, params, &dirs, ctx)?;
-    // The weight the coarse solve used, for every leaf (`auto` measures it there); the
-    // Gaussian's width per level, from the noise and the samples' spacing on its grid, the
-    // coarse local solves taking the width of the field they stand in for (the level above,
-    // or the dense solve).
     let spacing = coarse.density.sample_spacing();
-    for p in &mut levels {
-        p.point_weight = coarse.point_weight;
-        p.sigma_vox = smoothing_on(params, &coarse.noise, spacing, p.spacing);
-        p.fit_noise_voxels = coarse.noise.fit_noise_voxels();
-    }
-    for i in 0..levels.len() {
-        levels[i].coarse_sigma_vox = levels
-            .get(i + 1)
-            .map_or(coarse.sigma_vox, |up| up.sigma_vox);
-    }
+    measured_levels(&mut levels, params, &coarse, spacing);
     let plan = levels[0];
     let point_cap = ctx
         .budget
@@ -565,6 +553,28 @@ pub fn reconstruct(
         leaf_map: LeafMap::new(&leaves.all, &leaves.refined),
         preview: ts.preview,
     })
+}
+
+/// What the coarse pass measured, into every level's plan: the weight the coarse solve used
+/// (`auto` measures it there); the Gaussian's width per level, from the noise and the
+/// samples' `spacing` on its grid, the coarse local solves taking the width of the field they
+/// stand in for (the level above, or the dense solve).
+fn measured_levels(
+    levels: &mut [Plan],
+    params: &ReconParams,
+    coarse: &CoarsePass,
+    spacing: Option<f64>,
+) {
+    for p in levels.iter_mut() {
+        p.point_weight = coarse.point_weight;
+        p.sigma_vox = smoothing_on(params, &coarse.noise, spacing, p.spacing);
+        p.fit_noise_voxels = coarse.noise.fit_noise_voxels();
+    }
+    for i in 0..levels.len() {
+        levels[i].coarse_sigma_vox = levels
+            .get(i + 1)
+            .map_or(coarse.sigma_vox, |up| up.sigma_vox);
+    }
 }
 
 /// The samples' normals as the normal field weighs them, as PoissonRecon does:
@@ -1200,6 +1210,16 @@ struct SampleReads {
     sums: u64,
 }
 
+impl SampleReads {
+    /// Count a leaf's gathered samples.
+    fn add(&mut self, p: &LeafPoints) {
+        let summed: u64 = p.voxels.iter().map(|v| v.count as u64).sum();
+        self.points += p.pos.len() as u64 + summed;
+        self.summed += summed;
+        self.sums += p.voxels.len() as u64;
+    }
+}
+
 /// Pass 2: the occupied leaves of the coarse pass (taken from it), in Morton order, solved
 /// in parallel waves, spilled to the work directory. Leaves checkpointed already (by a
 /// resumed run, or by another shard) are summed from their checkpoints' headers. A shard
@@ -1234,7 +1254,7 @@ fn leaf_pass(
     let reuse = params.run.reuses_checkpoints();
     let claims = Claims::new(&dirs.claims);
     let order = params.run.shard.order(leaves.len());
-    let mut outcomes: Vec<Option<(f64, u64, bool)>> = vec![None; leaves.len()];
+    let mut outcomes: Vec<Option<LeafOutcome>> = vec![None; leaves.len()];
     // With the fine solves on a GPU a worker waits for its leaf's batch (a third of its time
     // on an H100 with 16 cores): twice the workers keep the cores busy meanwhile, and more
     // leaves wait at once, so the device's batches grow. The budget still bounds the
@@ -1246,23 +1266,31 @@ fn leaf_pass(
     let pool = gpu_pool.as_ref().unwrap_or(&ctx.pool);
     let workers = pool.current_num_threads();
     let wave = 2 * workers;
+    let solver = WaveSolver {
+        plan,
+        unit,
+        solvers: &solvers,
+        coarse,
+        rule: &rule,
+        dirs,
+        stage: &stage,
+        pool,
+        fine_bytes,
+    };
     // Room for a whole wave of solves and its points (as much as twice the plan's cache).
     let reads = src.begin_pass(workers as u64 * fine_bytes, ctx);
     for &claiming in params.run.shard.passes() {
         let mut next = 0;
         loop {
-            let mut wave_idx = Vec::with_capacity(wave);
-            while next < order.len() && wave_idx.len() < wave {
-                let (i, k) = (order[next], leaves[order[next]]);
-                next += 1;
-                if outcomes[i].is_some() || (reuse && leaf_path(&dirs.leaves, k).exists()) {
-                    continue;
-                }
-                if claiming && !claims.take(&format!("L{}", k.file_name()))? {
-                    continue;
-                }
-                wave_idx.push(i);
-            }
+            let pick = WavePick {
+                order: &order,
+                leaves: &leaves,
+                outcomes: &outcomes,
+                reuse,
+                claims: claiming.then_some(&claims),
+                dirs,
+            };
+            let wave_idx = pick.next(&mut next, wave)?;
             if wave_idx.is_empty() {
                 break;
             }
@@ -1270,44 +1298,10 @@ fn leaf_pass(
             let gathered = src.gather_wave(&ctx.pool, &keys)?;
             let mut todo = Vec::with_capacity(wave_idx.len());
             for (&i, p) in wave_idx.iter().zip(gathered) {
-                let summed: u64 = p.voxels.iter().map(|v| v.count as u64).sum();
-                read.points += p.pos.len() as u64 + summed;
-                read.summed += summed;
-                read.sums += p.voxels.len() as u64;
+                read.add(&p);
                 todo.push((leaves[i], p));
             }
-            let pts_bytes: u64 = todo.iter().map(|(_, p)| p.bytes()).sum();
-            // At most one solve a worker runs at once, and no more at once than fit in what
-            // is free (at least one).
-            let free = ctx.budget.total().saturating_sub(ctx.budget.used());
-            let at_once = (free.saturating_sub(pts_bytes) / fine_bytes.max(1))
-                .clamp(1, workers as u64) as usize;
-            let bytes = fine_bytes * todo.len().min(at_once) as u64 + pts_bytes;
-            // Over the whole budget it is an error that names the sizes; otherwise it is
-            // admitted without waiting on the permits this thread holds.
-            let _permit = if bytes > ctx.budget.total() {
-                Some(ctx.budget.acquire(bytes, "a wave of leaf solves")?)
-            } else {
-                tiles::admit_now(ctx, bytes)
-            };
-            let group = if at_once < workers {
-                at_once
-            } else {
-                todo.len().max(1)
-            };
-            let mut res: Vec<Result<LeafDetail>> = Vec::with_capacity(todo.len());
-            for g in todo.chunks(group) {
-                res.extend(pool.install(|| {
-                    g.par_iter()
-                        .map(|(k, p)| {
-                            let d = refine_leaf(plan, unit, &solvers, *k, p, coarse, &rule)?;
-                            write_leaf(&dirs.leaves, *k, &d)?;
-                            stage.inc(1);
-                            Ok(d)
-                        })
-                        .collect::<Vec<_>>()
-                }));
-            }
+            let res = solver.solve_wave(&todo, ctx)?;
             for (r, &i) in res.into_iter().zip(&wave_idx) {
                 let d = r?;
                 iterations += d.iterations as u64;
@@ -1316,58 +1310,10 @@ fn leaf_pass(
             }
         }
     }
-    // The leaves solved before (a resumed run) or by other shards: from their checkpoints'
-    // headers.
-    let rest: Vec<usize> = (0..leaves.len())
-        .filter(|&i| outcomes[i].is_none())
-        .collect();
-    let sums: Vec<Result<LeafSummary>> = ctx.pool.install(|| {
-        rest.par_iter()
-            .map(|&i| read_leaf_summary(&dirs.leaves, leaves[i]))
-            .collect()
-    });
-    for (&i, r) in rest.iter().zip(sums) {
-        let d = r?;
-        outcomes[i] = Some((d.iso_sum, d.iso_count, d.has_detail));
-    }
-    let reused = rest.len();
-    stage.inc(rest.len() as u64);
-    // In Morton order, as one process sums them: the same iso-value for any shard count.
-    let (mut iso_sum, mut iso_count) = (0.0, 0u64);
-    let mut refined = BTreeSet::new();
-    for (o, k) in outcomes.into_iter().zip(&leaves) {
-        let (s, c, is_refined) =
-            o.ok_or_else(|| Error::Internal(format!("leaf {k:?} was not visited")))?;
-        iso_sum += s;
-        iso_count += c;
-        if is_refined {
-            refined.insert(*k);
-        }
-    }
-    if let Some((name, g)) = solvers.gpu_stats() {
-        log::info!(
-            "GPU leaf solves on {name}: {} leaves in {} batches ({:.1} a batch, {} submissions), device thread busy {:.2} s (upload {:.2} s, kernels and flag reads {:.2} s, read-back {:.2} s), idle {:.2} s; workers: host side {:.2} s, waiting {:.2} s{}",
-            g.leaves,
-            g.batches,
-            g.leaves as f64 / g.batches.max(1) as f64,
-            g.submissions,
-            g.busy_s,
-            g.upload_s,
-            g.kernel_s,
-            g.read_s,
-            g.idle_s,
-            g.host_s,
-            g.wait_s,
-            if g.failed > 0 {
-                format!(
-                    ", {} leaves solved on the CPU after a GPU failure",
-                    g.failed
-                )
-            } else {
-                String::new()
-            }
-        );
-    }
+    let reused = read_unvisited(&leaves, &mut outcomes, dirs, ctx)?;
+    stage.inc(reused as u64);
+    let (iso_sum, iso_count, refined) = sum_outcomes(outcomes, &leaves)?;
+    log_gpu_solves(&solvers);
     src.end_pass(reads, stage_name);
     stage.finish(None);
     let iso = if iso_count > 0 {
@@ -1393,6 +1339,180 @@ fn leaf_pass(
         iterations,
         read,
     })
+}
+
+/// What a leaf's solve left for the pass's sums: its iso-value sum and count, and whether it
+/// was refined.
+type LeafOutcome = (f64, u64, bool);
+
+/// The choice of a wave's leaves: in the shard's order, those without an outcome, no
+/// checkpoint to reuse and (when claiming) a claim taken.
+struct WavePick<'a> {
+    order: &'a [usize],
+    leaves: &'a [CellKey],
+    outcomes: &'a [Option<LeafOutcome>],
+    reuse: bool,
+    claims: Option<&'a Claims>,
+    dirs: &'a WorkDir,
+}
+
+impl WavePick<'_> {
+    /// Up to `wave` leaves from `next` on (advanced past those looked at).
+    fn next(&self, next: &mut usize, wave: usize) -> Result<Vec<usize>> {
+        let mut wave_idx = Vec::with_capacity(wave);
+        while *next < self.order.len() && wave_idx.len() < wave {
+            let (i, k) = (self.order[*next], self.leaves[self.order[*next]]);
+            *next += 1;
+            if self.outcomes[i].is_some()
+                || (self.reuse && leaf_path(&self.dirs.leaves, k).exists())
+            {
+                continue;
+            }
+            if let Some(claims) = self.claims
+                && !claims.take(&format!("L{}", k.file_name()))?
+            {
+                continue;
+            }
+            wave_idx.push(i);
+        }
+        Ok(wave_idx)
+    }
+}
+
+/// What every solve of the leaf pass shares.
+struct WaveSolver<'a> {
+    plan: &'a Plan,
+    unit: f32,
+    solvers: &'a LeafSolvers,
+    coarse: &'a CoarseField,
+    rule: &'a LeafRule,
+    dirs: &'a WorkDir,
+    stage: &'a Stage,
+    pool: &'a rayon::ThreadPool,
+    /// A solve's scratch and the window of the levels above it.
+    fine_bytes: u64,
+}
+
+impl WaveSolver<'_> {
+    /// Solve and checkpoint a wave's leaves in parallel, in groups that fit the budget: at
+    /// most one solve a worker, and no more at once than fit in what is free (at least one).
+    fn solve_wave(
+        &self,
+        todo: &[(CellKey, LeafPoints)],
+        ctx: &Ctx,
+    ) -> Result<Vec<Result<LeafDetail>>> {
+        let (fine_bytes, workers) = (self.fine_bytes, self.pool.current_num_threads());
+        let pts_bytes: u64 = todo.iter().map(|(_, p)| p.bytes()).sum();
+        let free = ctx.budget.total().saturating_sub(ctx.budget.used());
+        let at_once =
+            (free.saturating_sub(pts_bytes) / fine_bytes.max(1)).clamp(1, workers as u64) as usize;
+        let bytes = fine_bytes * todo.len().min(at_once) as u64 + pts_bytes;
+        // Over the whole budget it is an error that names the sizes; otherwise it is
+        // admitted without waiting on the permits this thread holds.
+        let _permit = if bytes > ctx.budget.total() {
+            Some(ctx.budget.acquire(bytes, "a wave of leaf solves")?)
+        } else {
+            tiles::admit_now(ctx, bytes)
+        };
+        let group = if at_once < workers {
+            at_once
+        } else {
+            todo.len().max(1)
+        };
+        let mut res: Vec<Result<LeafDetail>> = Vec::with_capacity(todo.len());
+        for g in todo.chunks(group) {
+            res.extend(self.pool.install(|| {
+                g.par_iter()
+                    .map(|(k, p)| {
+                        let d = refine_leaf(
+                            self.plan,
+                            self.unit,
+                            self.solvers,
+                            *k,
+                            p,
+                            self.coarse,
+                            self.rule,
+                        )?;
+                        write_leaf(&self.dirs.leaves, *k, &d)?;
+                        self.stage.inc(1);
+                        Ok(d)
+                    })
+                    .collect::<Vec<_>>()
+            }));
+        }
+        Ok(res)
+    }
+}
+
+/// The leaves solved before (a resumed run) or by other shards: their outcomes from their
+/// checkpoints' headers. Returns how many.
+fn read_unvisited(
+    leaves: &[CellKey],
+    outcomes: &mut [Option<LeafOutcome>],
+    dirs: &WorkDir,
+    ctx: &Ctx,
+) -> Result<usize> {
+    let rest: Vec<usize> = (0..leaves.len())
+        .filter(|&i| outcomes[i].is_none())
+        .collect();
+    let sums: Vec<Result<LeafSummary>> = ctx.pool.install(|| {
+        rest.par_iter()
+            .map(|&i| read_leaf_summary(&dirs.leaves, leaves[i]))
+            .collect()
+    });
+    for (&i, r) in rest.iter().zip(sums) {
+        let d = r?;
+        outcomes[i] = Some((d.iso_sum, d.iso_count, d.has_detail));
+    }
+    Ok(rest.len())
+}
+
+/// The iso-value's sum and count and the refined leaves, in Morton order, as one process sums
+/// them: the same iso-value for any shard count.
+fn sum_outcomes(
+    outcomes: Vec<Option<LeafOutcome>>,
+    leaves: &[CellKey],
+) -> Result<(f64, u64, BTreeSet<CellKey>)> {
+    let (mut iso_sum, mut iso_count) = (0.0, 0u64);
+    let mut refined = BTreeSet::new();
+    for (o, k) in outcomes.into_iter().zip(leaves) {
+        let (s, c, is_refined) =
+            o.ok_or_else(|| Error::Internal(format!("leaf {k:?} was not visited")))?;
+        iso_sum += s;
+        iso_count += c;
+        if is_refined {
+            refined.insert(*k);
+        }
+    }
+    Ok((iso_sum, iso_count, refined))
+}
+
+/// The GPU leaf solves' figures, in the log, when the device solved them.
+fn log_gpu_solves(solvers: &LeafSolvers) {
+    if let Some((name, g)) = solvers.gpu_stats() {
+        log::info!(
+            "GPU leaf solves on {name}: {} leaves in {} batches ({:.1} a batch, {} submissions), device thread busy {:.2} s (upload {:.2} s, kernels and flag reads {:.2} s, read-back {:.2} s), idle {:.2} s; workers: host side {:.2} s, waiting {:.2} s{}",
+            g.leaves,
+            g.batches,
+            g.leaves as f64 / g.batches.max(1) as f64,
+            g.submissions,
+            g.busy_s,
+            g.upload_s,
+            g.kernel_s,
+            g.read_s,
+            g.idle_s,
+            g.host_s,
+            g.wait_s,
+            if g.failed > 0 {
+                format!(
+                    ", {} leaves solved on the CPU after a GPU failure",
+                    g.failed
+                )
+            } else {
+                String::new()
+            }
+        );
+    }
 }
 
 #[cfg(test)]
