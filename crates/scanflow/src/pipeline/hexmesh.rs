@@ -292,27 +292,7 @@ fn run(job: &HexJob, ctx: &Ctx, failure: &mut HexFailure) -> Result<HexStats> {
     failure.chords_split = chords_split;
 
     let clock = Instant::now();
-    let (field, smooth, polycube) = match &job.frames {
-        FrameChoice::Constant => (frames::constant_frames(mesh.tets.len()), None, None),
-        FrameChoice::Smooth => {
-            let (f, r) = ctx
-                .pool
-                .install(|| smooth_frames(&mesh, &topo.neighbours, &SmoothParams::default()))
-                .map_err(|e| Error::input(path, format!("smooth frames: {e}")))?;
-            (f, Some(r), None)
-        }
-        FrameChoice::Meta(meta) => {
-            let hexes: HexMesh = crate::hex::volume::read(meta)?.into_hex_mesh(meta)?;
-            let f = frames::meta_frames(&mesh, &hexes)
-                .map_err(|e| Error::input(meta, e.to_string()))?;
-            (f, None, None)
-        }
-        FrameChoice::Polycube => {
-            let p = polycube_frames(&mesh, &topo, &PolycubeParams::default())
-                .map_err(|e| Error::input(path, e.to_string()))?;
-            (p.frames.clone(), None, Some(p))
-        }
-    };
+    let (field, smooth, polycube) = frame_field(job, ctx, &mesh, &topo)?;
     // A polycube field is one rotation per tetrahedron of a single deformation: its
     // matchings are the identity by construction (the closest cube rotation would misread
     // the quarter turns the field makes across the polycube's edges).
@@ -405,19 +385,7 @@ fn run(job: &HexJob, ctx: &Ctx, failure: &mut HexFailure) -> Result<HexStats> {
                 continue;
             }
             Err(f) => {
-                let tried = if failure.tries.is_empty() {
-                    String::new()
-                } else {
-                    let list: Vec<String> = failure
-                        .tries
-                        .iter()
-                        .map(|t| format!("{:.6}", t.scale))
-                        .collect();
-                    format!(
-                        " (at edge {s:.6}, after {} failed too: see the report's tries)",
-                        list.join(", ")
-                    )
-                };
+                let tried = tried_before(failure, s);
                 return Err(Error::input(path, format!("{}{tried}", f.reason)));
             }
         };
@@ -448,6 +416,53 @@ fn run(job: &HexJob, ctx: &Ctx, failure: &mut HexFailure) -> Result<HexStats> {
         });
     }
     unreachable!("at least one scale is tried")
+}
+
+/// The frame field `--frames` asks for, with the smooth field's or the polycube's report.
+fn frame_field(
+    job: &HexJob,
+    ctx: &Ctx,
+    mesh: &TetMesh,
+    topo: &Topology,
+) -> Result<(Vec<Frame>, Option<SmoothReport>, Option<Polycube>)> {
+    let path = &job.input;
+    Ok(match &job.frames {
+        FrameChoice::Constant => (frames::constant_frames(mesh.tets.len()), None, None),
+        FrameChoice::Smooth => {
+            let (f, r) = ctx
+                .pool
+                .install(|| smooth_frames(mesh, &topo.neighbours, &SmoothParams::default()))
+                .map_err(|e| Error::input(path, format!("smooth frames: {e}")))?;
+            (f, Some(r), None)
+        }
+        FrameChoice::Meta(meta) => {
+            let hexes: HexMesh = crate::hex::volume::read(meta)?.into_hex_mesh(meta)?;
+            let f =
+                frames::meta_frames(mesh, &hexes).map_err(|e| Error::input(meta, e.to_string()))?;
+            (f, None, None)
+        }
+        FrameChoice::Polycube => {
+            let p = polycube_frames(mesh, topo, &PolycubeParams::default())
+                .map_err(|e| Error::input(path, e.to_string()))?;
+            (p.frames.clone(), None, Some(p))
+        }
+    })
+}
+
+/// What a failure at edge `s` adds about the edges tried before it (none: nothing).
+fn tried_before(failure: &HexFailure, s: f64) -> String {
+    if failure.tries.is_empty() {
+        return String::new();
+    }
+    let list: Vec<String> = failure
+        .tries
+        .iter()
+        .map(|t| format!("{:.6}", t.scale))
+        .collect();
+    format!(
+        " (at edge {s:.6}, after {} failed too: see the report's tries)",
+        list.join(", ")
+    )
 }
 
 /// The grid's edge without `--scale`: the default edge `s`, or the solid's volume over its
@@ -575,32 +590,7 @@ fn mesh_at(
     seconds[2] += clock.elapsed().as_secs_f64();
     failure.param = Some(param.clone());
     if grid.is_none() && param.flipped_final > 0 {
-        let cause = match &param.first_flip {
-            Some(c) if param.flipped_continuous == 0 => format!(
-                "; the first flips came with rounding round {} ({}), tetrahedra {:?}",
-                c.round,
-                c.fixed
-                    .iter()
-                    .map(|(what, k)| format!("{what} to {k}"))
-                    .collect::<Vec<_>>()
-                    .join(", "),
-                c.tets
-            ),
-            _ => format!(
-                "; {} were flipped before any rounding: the frame field does not fit the shape at scale {scale}",
-                param.flipped_continuous
-            ),
-        };
-        return Err(Failed {
-            reason: format!(
-                "the parameterisation flips {} of {} tetrahedra, so no valid hexahedra can be extracted{cause}; try a larger --scale or other --frames",
-                param.flipped_final,
-                p.mesh.tets.len()
-            ),
-            // Flips before any rounding are the field's, at every edge.
-            retry: param.flipped_continuous == 0,
-            unfit: param.flipped_continuous > 0,
-        });
+        return Err(flip_failure(&param, scale, p.mesh.tets.len()));
     }
 
     let clock = Instant::now();
@@ -651,33 +641,7 @@ fn mesh_at(
     failure.pillow = pillowed.clone();
     failure.relax = relaxed.clone();
     if quality.inverted > 0 && !(job.keep_inverted && last) {
-        let worst: Vec<String> = quality
-            .worst_hexes
-            .iter()
-            .take(5)
-            .map(|w| format!("{} ({:.3})", w.hex, w.scaled_jacobian))
-            .collect();
-        let folded = relaxed
-            .as_ref()
-            .and_then(|r| r.untangle.as_ref())
-            .and_then(|u| u.conflicts.first())
-            .map_or(String::new(), |&[a, b]| {
-                format!(
-                    "; hexahedra {} and {} are folded onto each other at a corner (they share its three edges with opposite orientations), which no placement of the vertices undoes",
-                    a / 8,
-                    b / 8
-                )
-            });
-        return Err(Failed {
-            reason: format!(
-                "{} of {} hexahedra are inverted (scaled Jacobian ≤ 0), worst: {}{folded}; nothing written (--keep-inverted writes them anyway)",
-                quality.inverted,
-                quality.hexes,
-                worst.join(", ")
-            ),
-            retry: true,
-            unfit: false,
-        });
+        return Err(inverted_failure(&quality, relaxed.as_ref()));
     }
     Ok(Meshed {
         hexes,
@@ -689,6 +653,67 @@ fn mesh_at(
         pillow: pillowed,
         relax: relaxed,
     })
+}
+
+/// Why a map that flips tetrahedra yields no hexahedra (`tets` in all), and whether
+/// another edge may help: flips before any rounding are the field's, at every edge.
+fn flip_failure(param: &ParamReport, scale: f64, tets: usize) -> Failed {
+    let cause = match &param.first_flip {
+        Some(c) if param.flipped_continuous == 0 => format!(
+            "; the first flips came with rounding round {} ({}), tetrahedra {:?}",
+            c.round,
+            c.fixed
+                .iter()
+                .map(|(what, k)| format!("{what} to {k}"))
+                .collect::<Vec<_>>()
+                .join(", "),
+            c.tets
+        ),
+        _ => format!(
+            "; {} were flipped before any rounding: the frame field does not fit the shape at scale {scale}",
+            param.flipped_continuous
+        ),
+    };
+    Failed {
+        reason: format!(
+            "the parameterisation flips {} of {} tetrahedra, so no valid hexahedra can be extracted{cause}; try a larger --scale or other --frames",
+            param.flipped_final, tets
+        ),
+        // Flips before any rounding are the field's, at every edge.
+        retry: param.flipped_continuous == 0,
+        unfit: param.flipped_continuous > 0,
+    }
+}
+
+/// Why hexahedra that came out inverted are not written, naming the worst and a fold
+/// the untangling could not undo.
+fn inverted_failure(quality: &MeshQuality, relaxed: Option<&RelaxReport>) -> Failed {
+    let worst: Vec<String> = quality
+        .worst_hexes
+        .iter()
+        .take(5)
+        .map(|w| format!("{} ({:.3})", w.hex, w.scaled_jacobian))
+        .collect();
+    let folded = relaxed
+        .and_then(|r| r.untangle.as_ref())
+        .and_then(|u| u.conflicts.first())
+        .map_or(String::new(), |&[a, b]| {
+            format!(
+                "; hexahedra {} and {} are folded onto each other at a corner (they share its three edges with opposite orientations), which no placement of the vertices undoes",
+                a / 8,
+                b / 8
+            )
+        });
+    Failed {
+        reason: format!(
+            "{} of {} hexahedra are inverted (scaled Jacobian ≤ 0), worst: {}{folded}; nothing written (--keep-inverted writes them anyway)",
+            quality.inverted,
+            quality.hexes,
+            worst.join(", ")
+        ),
+        retry: true,
+        unfit: false,
+    }
 }
 
 #[cfg(test)]

@@ -368,48 +368,7 @@ fn build(prep: Prepared, out: &Path, shard: Shard, dirs: &Dirs, ctx: &Ctx) -> Re
     let slices: Vec<&[(usize, crate::io::ChunkSpec)]> = chunks.chunks(CHUNKS_PER_ITEM).collect();
     let n = slices.len();
 
-    // Count: on the first cube, and once more on the exact one when the bounds say so.
-    let mut cube = first_cube(&prep.provisional);
-    let mut total;
-    let mut round = 0;
-    loop {
-        let dir = dirs.sub(&format!("count{round}"));
-        let path = |i: usize| dir.join(format!("{i}.cnt"));
-        let stage = ctx
-            .progress
-            .stage("count", Some(prep.inputs.total), "points");
-        items(
-            shard,
-            n,
-            dirs,
-            &format!("c{round}-"),
-            |i| path(i).exists(),
-            |i| {
-                let _permit = ctx
-                    .budget
-                    .acquire(prep.grid_bytes() / 2, "the counting grid")?;
-                let p = prep.count(slices[i], &cube, &stage, ctx)?;
-                atomic::write(&path(i), &p.encode(), Durability::Renamed)
-            },
-        )?;
-        stage.finish(None);
-        let _permit = ctx.budget.acquire(prep.grid_bytes(), "the counting grid")?;
-        total = Partial::empty(prep.levels, prep.inputs.specs.len());
-        for i in 0..n {
-            let bytes = std::fs::read(path(i)).with_path(path(i))?;
-            total.add(&Partial::decode(&bytes, &path(i))?);
-        }
-        match (round == 0)
-            .then(|| recount_cube(&prep.provisional, &total.bounds))
-            .flatten()
-        {
-            Some(c) => {
-                cube = c;
-                round = 1;
-            }
-            None => break,
-        }
-    }
+    let (cube, total) = count_pass(&prep, &slices, shard, dirs, ctx)?;
     crate::store::no_valid_points(&prep.inputs, &total.bounds)?;
     prep.inputs.raise_max_colors(&total.max_color);
     prep.inputs.settle_colour_scale();
@@ -508,16 +467,7 @@ fn build(prep: Prepared, out: &Path, shard: Shard, dirs: &Dirs, ctx: &Ctx) -> Re
     stage.finish(None);
     drop(packs);
 
-    let mut cells = Vec::new();
-    let mut oversized_cells = 0;
-    for i in 0..k {
-        let text = std::fs::read(assembled(i)).with_path(assembled(i))?;
-        let a: Assembled = serde_json::from_slice(&text)
-            .map_err(|e| Error::input(assembled(i), format!("damaged checkpoint: {e}")))?;
-        cells.extend(a.cells);
-        oversized_cells += a.oversized;
-    }
-    cells.sort_by_key(|c| c.key);
+    let (cells, oversized_cells) = read_assembled(k, assembled)?;
     let found = Found {
         cube,
         bounds,
@@ -529,6 +479,78 @@ fn build(prep: Prepared, out: &Path, shard: Shard, dirs: &Dirs, ctx: &Ctx) -> Re
         staged.read_cells_from(cells_dir);
     }
     Ok(staged)
+}
+
+/// Count: on the first cube, and once more on the exact one when the bounds say so. Returns
+/// the cube and the summed counts.
+fn count_pass(
+    prep: &Prepared,
+    slices: &[&[(usize, crate::io::ChunkSpec)]],
+    shard: Shard,
+    dirs: &Dirs,
+    ctx: &Ctx,
+) -> Result<(crate::types::Cube, Partial)> {
+    let n = slices.len();
+    let mut cube = first_cube(&prep.provisional);
+    let mut total;
+    let mut round = 0;
+    loop {
+        let dir = dirs.sub(&format!("count{round}"));
+        let path = |i: usize| dir.join(format!("{i}.cnt"));
+        let stage = ctx
+            .progress
+            .stage("count", Some(prep.inputs.total), "points");
+        items(
+            shard,
+            n,
+            dirs,
+            &format!("c{round}-"),
+            |i| path(i).exists(),
+            |i| {
+                let _permit = ctx
+                    .budget
+                    .acquire(prep.grid_bytes() / 2, "the counting grid")?;
+                let p = prep.count(slices[i], &cube, &stage, ctx)?;
+                atomic::write(&path(i), &p.encode(), Durability::Renamed)
+            },
+        )?;
+        stage.finish(None);
+        let _permit = ctx.budget.acquire(prep.grid_bytes(), "the counting grid")?;
+        total = Partial::empty(prep.levels, prep.inputs.specs.len());
+        for i in 0..n {
+            let bytes = std::fs::read(path(i)).with_path(path(i))?;
+            total.add(&Partial::decode(&bytes, &path(i))?);
+        }
+        match (round == 0)
+            .then(|| recount_cube(&prep.provisional, &total.bounds))
+            .flatten()
+        {
+            Some(c) => {
+                cube = c;
+                round = 1;
+            }
+            None => break,
+        }
+    }
+    Ok((cube, total))
+}
+
+/// The cells the `k` assembly items made, in key order, and how many were oversized.
+fn read_assembled(
+    k: usize,
+    assembled: impl Fn(usize) -> PathBuf,
+) -> Result<(Vec<CellEntry>, usize)> {
+    let mut cells = Vec::new();
+    let mut oversized_cells = 0;
+    for i in 0..k {
+        let text = std::fs::read(assembled(i)).with_path(assembled(i))?;
+        let a: Assembled = serde_json::from_slice(&text)
+            .map_err(|e| Error::input(assembled(i), format!("damaged checkpoint: {e}")))?;
+        cells.extend(a.cells);
+        oversized_cells += a.oversized;
+    }
+    cells.sort_by_key(|c| c.key);
+    Ok((cells, oversized_cells))
 }
 
 /// Estimate the normals when they are wanted, then commit the store.
