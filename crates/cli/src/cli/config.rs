@@ -410,25 +410,8 @@ pub struct ReconstructConfig {
 
 impl ReconstructConfig {
     fn new(a: ReconstructArgs) -> Result<ReconstructConfig> {
-        let smooth = match a.smooth.as_str() {
-            "measured" => Smoothing::Measured,
-            w => match w.parse::<f64>() {
-                Ok(s) if s > 0.0 && s <= MAX_SMOOTH_VOXELS => Smoothing::Fixed(s),
-                _ => bail!(
-                    "--smooth {w}: expected measured or a width in voxels in (0, {MAX_SMOOTH_VOXELS}]"
-                ),
-            },
-        };
-        let point_weight = match a.point_weight.as_str() {
-            "standard" => PointWeight::Standard,
-            "auto" => PointWeight::Auto,
-            w => match w.parse::<f64>() {
-                Ok(a) if (0.0..=MAX_POINT_WEIGHT).contains(&a) => PointWeight::Fixed(a),
-                _ => bail!(
-                    "--point-weight {w}: expected standard, auto or a screening weight in [0, {MAX_POINT_WEIGHT}]"
-                ),
-            },
-        };
+        let smooth = parse_smooth(&a.smooth)?;
+        let point_weight = parse_point_weight(&a.point_weight)?;
         let run = RunConfig::new(&a.common)?;
         let error = a.error;
         if !(error >= 0.0 && error.is_finite()) {
@@ -518,59 +501,10 @@ impl ReconstructConfig {
         params.run.resume = a.resume;
         params.run.gpu = a.gpu.into();
         params.run.gpu_solve = a.gpu_solve.into();
-        let hex = match a.hex {
-            Some(h) => {
-                if mesh.format == MeshFormat::Stl {
-                    bail!(
-                        "--hex {}: hexmesh reads the surface as PLY or OBJ; name -o *.ply or *.obj",
-                        h.display()
-                    );
-                }
-                hex_scale(a.hex_scale, "--hex-scale")?;
-                paths::output_file_as("--hex", &h, VOLUME_EXTS, "a hexahedral mesh")?;
-                paths::not_an_input(&h, &given)?;
-                if h == a.output {
-                    bail!("--hex {}: the same file as -o", h.display());
-                }
-                Some(scanflow::pipeline::hexmesh::HexJob {
-                    input: a.output.clone(),
-                    output: h,
-                    frames: scanflow::pipeline::hexmesh::FrameChoice::Polycube,
-                    scale: a.hex_scale,
-                    tet_size: None,
-                    pillow: None,
-                    relax: true,
-                    keep_inverted: false,
-                    report: None,
-                })
-            }
-            None => None,
-        };
+        let hex = hex_job(a.hex, a.hex_scale, &mesh, &a.output, &given)?;
         let points = Points::new(a.inputs, a.conf, &a.normal)?;
-        if a.confidence
-            && let Points::Files(inputs, _) = &points
-        {
-            // Headers only: refused before any work.
-            let attrs = inputs
-                .files
-                .iter()
-                .map(|f| Ok(scanflow::io::open(f)?.attributes()))
-                .collect::<Result<Vec<_>>>()?;
-            // Normals come from the inputs (so their lengths can be confidences) unless they
-            // are estimated: always with `estimate`, with `auto` when one input has none.
-            let kept = match a.normal.normals {
-                super::args::NormalsChoice::Estimate => false,
-                super::args::NormalsChoice::Use => true,
-                super::args::NormalsChoice::Auto => attrs.iter().all(|at| at.normal),
-            };
-            for (f, at) in inputs.files.iter().zip(&attrs) {
-                if !(at.confidence || (at.normal && kept)) {
-                    bail!(
-                        "--confidence: {} carries no confidence (a PLY vertex property \"confidence\") and no normals whose lengths could be the confidences, so there is nothing to weigh its points by",
-                        f.display()
-                    );
-                }
-            }
+        if a.confidence {
+            check_confidences(&points, a.normal.normals)?;
         }
         if let Some(text) = &a.shard {
             if let Some(p) = &a.mesh.preview {
@@ -597,6 +531,102 @@ impl ReconstructConfig {
             hex,
         })
     }
+}
+
+/// `--smooth`: `measured` or a width in voxels.
+fn parse_smooth(s: &str) -> Result<Smoothing> {
+    Ok(match s {
+        "measured" => Smoothing::Measured,
+        w => match w.parse::<f64>() {
+            Ok(s) if s > 0.0 && s <= MAX_SMOOTH_VOXELS => Smoothing::Fixed(s),
+            _ => bail!(
+                "--smooth {w}: expected measured or a width in voxels in (0, {MAX_SMOOTH_VOXELS}]"
+            ),
+        },
+    })
+}
+
+/// `--point-weight`: `standard`, `auto` or a screening weight.
+fn parse_point_weight(s: &str) -> Result<PointWeight> {
+    Ok(match s {
+        "standard" => PointWeight::Standard,
+        "auto" => PointWeight::Auto,
+        w => match w.parse::<f64>() {
+            Ok(a) if (0.0..=MAX_POINT_WEIGHT).contains(&a) => PointWeight::Fixed(a),
+            _ => bail!(
+                "--point-weight {w}: expected standard, auto or a screening weight in [0, {MAX_POINT_WEIGHT}]"
+            ),
+        },
+    })
+}
+
+/// `--hex`: the hexahedra of the reconstructed surface `output` (a PLY or OBJ `mesh`), none of
+/// the `given` inputs.
+fn hex_job(
+    hex: Option<PathBuf>,
+    hex_scale_opt: Option<f64>,
+    mesh: &MeshTarget,
+    output: &Path,
+    given: &[&Path],
+) -> Result<Option<scanflow::pipeline::hexmesh::HexJob>> {
+    Ok(match hex {
+        Some(h) => {
+            if mesh.format == MeshFormat::Stl {
+                bail!(
+                    "--hex {}: hexmesh reads the surface as PLY or OBJ; name -o *.ply or *.obj",
+                    h.display()
+                );
+            }
+            hex_scale(hex_scale_opt, "--hex-scale")?;
+            paths::output_file_as("--hex", &h, VOLUME_EXTS, "a hexahedral mesh")?;
+            paths::not_an_input(&h, given)?;
+            if h == output {
+                bail!("--hex {}: the same file as -o", h.display());
+            }
+            Some(scanflow::pipeline::hexmesh::HexJob {
+                input: output.to_path_buf(),
+                output: h,
+                frames: scanflow::pipeline::hexmesh::FrameChoice::Polycube,
+                scale: hex_scale_opt,
+                tet_size: None,
+                pillow: None,
+                relax: true,
+                keep_inverted: false,
+                report: None,
+            })
+        }
+        None => None,
+    })
+}
+
+/// `--confidence` on point files: each must carry confidences, or normals kept from the file
+/// whose lengths are (headers only: refused before any work).
+fn check_confidences(points: &Points, normals: super::args::NormalsChoice) -> Result<()> {
+    let Points::Files(inputs, _) = points else {
+        return Ok(());
+    };
+    // Headers only: refused before any work.
+    let attrs = inputs
+        .files
+        .iter()
+        .map(|f| Ok(scanflow::io::open(f)?.attributes()))
+        .collect::<Result<Vec<_>>>()?;
+    // Normals come from the inputs (so their lengths can be confidences) unless they
+    // are estimated: always with `estimate`, with `auto` when one input has none.
+    let kept = match normals {
+        super::args::NormalsChoice::Estimate => false,
+        super::args::NormalsChoice::Use => true,
+        super::args::NormalsChoice::Auto => attrs.iter().all(|at| at.normal),
+    };
+    for (f, at) in inputs.files.iter().zip(&attrs) {
+        if !(at.confidence || (at.normal && kept)) {
+            bail!(
+                "--confidence: {} carries no confidence (a PLY vertex property \"confidence\") and no normals whose lengths could be the confidences, so there is nothing to weigh its points by",
+                f.display()
+            );
+        }
+    }
+    Ok(())
 }
 
 /// `scanflow merge`.
