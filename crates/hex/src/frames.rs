@@ -32,6 +32,7 @@
 use super::mesh::{Frame, HexMesh, NO_TET, TetMesh};
 use super::rotation::{Holonomy, Rot, holonomy, matching};
 use super::topology::Topology;
+use crate::geom::vec::{dot, norm, sub};
 
 /// The identity frame.
 pub const IDENTITY: Frame = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
@@ -39,18 +40,6 @@ pub const IDENTITY: Frame = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
 /// Constant frames: the coordinate axes in every tetrahedron.
 pub fn constant_frames(tets: usize) -> Vec<Frame> {
     vec![IDENTITY; tets]
-}
-
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-fn norm(a: [f64; 3]) -> f64 {
-    dot(a, a).sqrt()
 }
 
 /// Trilinear shape functions' derivatives at `(ξ, η, ζ) ∈ [0, 1]³` in VTK corner order: the

@@ -59,6 +59,7 @@
 //! Jacobi one (all displacements from the same positions), computed in parallel and
 //! gathered in index order, so the result is the same for any thread count.
 
+use crate::geom::vec::{add, cross, dot, scale, sub};
 use crate::mesh::HexMesh;
 use crate::quality::{HEX_EDGES, hex_scaled_jacobian};
 use crate::types::Aabb;
@@ -145,30 +146,6 @@ pub struct RelaxReport {
     /// The untangling of the hexahedra the relaxation left inverted, when it did (module
     /// docs, step 5).
     pub untangle: Option<UntangleReport>,
-}
-
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-fn add(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
-}
-
-fn scale(a: [f64; 3], s: f64) -> [f64; 3] {
-    a.map(|x| x * s)
-}
-
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
 }
 
 fn dist2(a: [f64; 3], b: [f64; 3]) -> f64 {
@@ -498,6 +475,212 @@ fn misfit(verts: &[[f64; 3]], hexes: &[[u32; 8]]) -> f64 {
     (per.iter().sum::<f64>() / (8 * hexes.len()) as f64).sqrt()
 }
 
+/// Vertex → (hexahedron, corner) incidences, CSR: vertex `v`'s are
+/// `inc[off[v]..off[v + 1]]`, in hexahedron order.
+fn incidences(hex: &HexMesh) -> (Vec<usize>, Vec<(u32, u8)>) {
+    let nv = hex.verts.len();
+    let mut off = vec![0usize; nv + 1];
+    for h in &hex.hexes {
+        for &v in h {
+            off[v as usize + 1] += 1;
+        }
+    }
+    for v in 0..nv {
+        off[v + 1] += off[v];
+    }
+    let mut inc = vec![(0u32, 0u8); off[nv]];
+    let mut fill = off.clone();
+    for (k, h) in hex.hexes.iter().enumerate() {
+        for (c, &v) in h.iter().enumerate() {
+            inc[fill[v as usize]] = (k as u32, c as u8);
+            fill[v as usize] += 1;
+        }
+    }
+    (off, inc)
+}
+
+/// Each vertex's kind: unused and feature vertices (and all boundary vertices when there
+/// is no surface to project onto) are fixed.
+fn vertex_kinds(
+    off: &[usize],
+    normals: &[Vec<[f64; 3]>],
+    bvh: &Bvh,
+    params: &RelaxParams,
+) -> Vec<Kind> {
+    let nv = off.len() - 1;
+    let cos_feature = params.feature_angle_deg.to_radians().cos();
+    (0..nv)
+        .map(|v| {
+            if off[v + 1] == off[v] {
+                Kind::Fixed
+            } else if normals[v].is_empty() {
+                Kind::Interior
+            } else if bvh.is_empty() {
+                Kind::Fixed
+            } else {
+                let ns = &normals[v];
+                let bent = (0..ns.len())
+                    .any(|a| (a + 1..ns.len()).any(|b| dot(ns[a], ns[b]) < cos_feature));
+                if bent { Kind::Fixed } else { Kind::Surface }
+            }
+        })
+        .collect()
+}
+
+/// The scaled Jacobian of hexahedron `k` at the positions `verts`.
+fn sj_of(hexes: &[[u32; 8]], verts: &[[f64; 3]], k: usize) -> f64 {
+    hex_scaled_jacobian(&corners(verts, &hexes[k]))
+}
+
+/// The mean edge length, summed hexahedron by hexahedron (shared edges counted once per
+/// hexahedron); 0 without hexahedra.
+fn mean_edge_length(hex: &HexMesh) -> f64 {
+    let nh = hex.hexes.len();
+    let mut edge_sum = 0.0;
+    for h in &hex.hexes {
+        for [a, b] in HEX_EDGES {
+            edge_sum += dist2(hex.verts[h[a] as usize], hex.verts[h[b] as usize]).sqrt();
+        }
+    }
+    if nh > 0 {
+        edge_sum / (12 * nh) as f64
+    } else {
+        0.0
+    }
+}
+
+/// Step 4 of the module docs: applies the proposals, then puts back the moves that make a
+/// hexahedron worse than its own scaled Jacobian or `tau` (whichever is lower), until none
+/// does. `(off, inc)` are the incidences; `(mark, epoch)` the per-hexahedron visit marks.
+/// Returns the new positions, their scaled Jacobians, the moved vertices in order and which
+/// of them were put back.
+fn apply_moves(
+    hex: &HexMesh,
+    proposal: &[Option<[f64; 3]>],
+    (off, inc): (&[usize], &[(u32, u8)]),
+    sj: &[f64],
+    tau: f64,
+    (mark, epoch): (&mut [u32], &mut u32),
+) -> (Vec<[f64; 3]>, Vec<f64>, Vec<u32>, Vec<bool>) {
+    let nv = hex.verts.len();
+    let mut next = hex.verts.clone();
+    let moved: Vec<u32> = (0..nv as u32)
+        .filter(|&v| proposal[v as usize].is_some())
+        .collect();
+    let mut dirty = Vec::new();
+    *epoch += 1;
+    for &v in &moved {
+        next[v as usize] = proposal[v as usize].expect("moved");
+        for &(k, _) in &inc[off[v as usize]..off[v as usize + 1]] {
+            if mark[k as usize] != *epoch {
+                mark[k as usize] = *epoch;
+                dirty.push(k);
+            }
+        }
+    }
+    let mut is_moved = vec![false; nv];
+    for &v in &moved {
+        is_moved[v as usize] = true;
+    }
+    let mut put_back = vec![false; nv];
+    let mut sj_next = sj.to_vec();
+    while !dirty.is_empty() {
+        dirty.sort_unstable();
+        let vals: Vec<f64> = dirty
+            .par_iter()
+            .map(|&k| sj_of(&hex.hexes, &next, k as usize))
+            .collect();
+        let mut worse = Vec::new();
+        for (&k, &val) in dirty.iter().zip(vals.iter()) {
+            sj_next[k as usize] = val;
+            if val.is_nan() || val < sj[k as usize].min(tau) {
+                worse.push(k);
+            }
+        }
+        *epoch += 1;
+        dirty.clear();
+        for k in worse {
+            for &v in &hex.hexes[k as usize] {
+                let vi = v as usize;
+                if is_moved[vi] && !put_back[vi] {
+                    put_back[vi] = true;
+                    next[vi] = hex.verts[vi];
+                    for &(h, _) in &inc[off[vi]..off[vi + 1]] {
+                        if mark[h as usize] != *epoch {
+                            mark[h as usize] = *epoch;
+                            dirty.push(h);
+                        }
+                    }
+                }
+            }
+        }
+    }
+    (next, sj_next, moved, put_back)
+}
+
+/// Step 5 of the module docs: hexahedra still inverted are untangled: first with the
+/// boundary held, then with the surface vertices sliding in their tangent planes and
+/// projected back onto the surface; a round is kept only when it leaves fewer hexahedra
+/// inverted. `sj` holds the scaled Jacobians at the current positions and is kept up to date.
+fn untangle_rounds(
+    hex: &mut HexMesh,
+    kind: &[Kind],
+    normals: &[Vec<[f64; 3]>],
+    project: &impl Fn(usize, [f64; 3]) -> Option<[f64; 3]>,
+    sj: &mut Vec<f64>,
+    report: &mut RelaxReport,
+) {
+    let (nv, nh) = (hex.verts.len(), hex.hexes.len());
+    for round in 0..UNTANGLE_ROUNDS {
+        let inverted = summary(sj).2;
+        if inverted == 0 {
+            break;
+        }
+        let freedom: Vec<Freedom> = (0..nv)
+            .map(|v| match kind[v] {
+                Kind::Interior => Freedom::Free,
+                Kind::Fixed => Freedom::Fixed,
+                Kind::Surface if round == 0 => Freedom::Fixed,
+                Kind::Surface => {
+                    let n = normals[v].iter().fold([0.0; 3], |a, &b| add(a, b));
+                    let l = dot(n, n).sqrt();
+                    if l > 0.0 {
+                        Freedom::Plane(scale(n, 1.0 / l))
+                    } else {
+                        Freedom::Fixed
+                    }
+                }
+            })
+            .collect();
+        let before = hex.verts.clone();
+        let r = untangle_hexes(
+            &mut hex.verts,
+            &hex.hexes,
+            &freedom,
+            &UntangleParams::default(),
+        );
+        for v in 0..nv {
+            if kind[v] == Kind::Surface
+                && hex.verts[v] != before[v]
+                && let Some(q) = project(v, hex.verts[v])
+            {
+                hex.verts[v] = q;
+            }
+        }
+        let untangled: Vec<f64> = (0..nh)
+            .into_par_iter()
+            .map(|k| sj_of(&hex.hexes, &hex.verts, k))
+            .collect();
+        let worse = summary(&untangled).2 >= inverted;
+        report.untangle = Some(r);
+        if worse {
+            hex.verts = before;
+            break;
+        }
+        *sj = untangled;
+    }
+}
+
 /// Relaxes `hex` towards ideal cubes, keeping its boundary vertices on the surface
 /// `boundary_verts`/`boundary_tris` (typically the tetrahedral mesh's boundary triangles);
 /// see the module docs. With no triangles the boundary vertices are held fixed. Hexahedra
@@ -517,45 +700,12 @@ pub fn relax(
     let nh = hex.hexes.len();
     let mut report = RelaxReport::default();
 
-    // Vertex → (hexahedron, corner) incidences, CSR.
-    let mut off = vec![0usize; nv + 1];
-    for h in &hex.hexes {
-        for &v in h {
-            off[v as usize + 1] += 1;
-        }
-    }
-    for v in 0..nv {
-        off[v + 1] += off[v];
-    }
-    let mut inc = vec![(0u32, 0u8); off[nv]];
-    let mut fill = off.clone();
-    for (k, h) in hex.hexes.iter().enumerate() {
-        for (c, &v) in h.iter().enumerate() {
-            inc[fill[v as usize]] = (k as u32, c as u8);
-            fill[v as usize] += 1;
-        }
-    }
+    let (off, inc) = incidences(hex);
 
     // Boundary quadrilaterals: faces of exactly one hexahedron.
     let normals = hex.boundary_normals();
     let bvh = Bvh::new(boundary_verts, boundary_tris);
-    let cos_feature = params.feature_angle_deg.to_radians().cos();
-    let kind: Vec<Kind> = (0..nv)
-        .map(|v| {
-            if off[v + 1] == off[v] {
-                Kind::Fixed
-            } else if normals[v].is_empty() {
-                Kind::Interior
-            } else if bvh.is_empty() {
-                Kind::Fixed
-            } else {
-                let ns = &normals[v];
-                let bent = (0..ns.len())
-                    .any(|a| (a + 1..ns.len()).any(|b| dot(ns[a], ns[b]) < cos_feature));
-                if bent { Kind::Fixed } else { Kind::Surface }
-            }
-        })
-        .collect();
+    let kind = vertex_kinds(&off, &normals, &bvh, params);
     // A surface vertex goes to the nearest surface point facing its own quadrilaterals' way,
     // so that where the solid is thin it stays on its side (and off a neighbouring part).
     let outward: Vec<[f64; 3]> = normals
@@ -571,27 +721,16 @@ pub fn relax(
     report.surface_vertices = kind.iter().filter(|&&k| k == Kind::Surface).count();
     report.fixed_vertices = nv - report.interior_vertices - report.surface_vertices;
 
-    let sj_of = |verts: &[[f64; 3]], k: usize| hex_scaled_jacobian(&corners(verts, &hex.hexes[k]));
     let mut sj: Vec<f64> = (0..nh)
         .into_par_iter()
-        .map(|k| sj_of(&hex.verts, k))
+        .map(|k| sj_of(&hex.hexes, &hex.verts, k))
         .collect();
     let (min0, mean0, bad0) = summary(&sj);
     report.min_sj_before = min0;
     report.mean_sj_before = mean0;
     report.inverted_before = bad0;
 
-    let mut edge_sum = 0.0;
-    for h in &hex.hexes {
-        for [a, b] in HEX_EDGES {
-            edge_sum += dist2(hex.verts[h[a] as usize], hex.verts[h[b] as usize]).sqrt();
-        }
-    }
-    let mean_edge = if nh > 0 {
-        edge_sum / (12 * nh) as f64
-    } else {
-        0.0
-    };
+    let mean_edge = mean_edge_length(hex);
     let rel = |x: f64| if mean_edge > 0.0 { x / mean_edge } else { 0.0 };
     report.cube_misfit_before = rel(misfit(&hex.verts, &hex.hexes));
     let step = params.step.clamp(0.0, 1.0);
@@ -644,58 +783,14 @@ pub fn relax(
         // 4: apply, then put back the moves that make a hexahedron worse than allowed.
         let (global_min, _, _) = summary(&sj);
         let tau = global_min.max(params.sj_floor);
-        let mut next = hex.verts.clone();
-        let moved: Vec<u32> = (0..nv as u32)
-            .filter(|&v| proposal[v as usize].is_some())
-            .collect();
-        let mut dirty = Vec::new();
-        epoch += 1;
-        for &v in &moved {
-            next[v as usize] = proposal[v as usize].expect("moved");
-            for &(k, _) in &inc[off[v as usize]..off[v as usize + 1]] {
-                if mark[k as usize] != epoch {
-                    mark[k as usize] = epoch;
-                    dirty.push(k);
-                }
-            }
-        }
-        let mut is_moved = vec![false; nv];
-        for &v in &moved {
-            is_moved[v as usize] = true;
-        }
-        let mut put_back = vec![false; nv];
-        let mut sj_next = sj.clone();
-        while !dirty.is_empty() {
-            dirty.sort_unstable();
-            let vals: Vec<f64> = dirty
-                .par_iter()
-                .map(|&k| sj_of(&next, k as usize))
-                .collect();
-            let mut worse = Vec::new();
-            for (&k, &val) in dirty.iter().zip(vals.iter()) {
-                sj_next[k as usize] = val;
-                if val.is_nan() || val < sj[k as usize].min(tau) {
-                    worse.push(k);
-                }
-            }
-            epoch += 1;
-            dirty.clear();
-            for k in worse {
-                for &v in &hex.hexes[k as usize] {
-                    let vi = v as usize;
-                    if is_moved[vi] && !put_back[vi] {
-                        put_back[vi] = true;
-                        next[vi] = hex.verts[vi];
-                        for &(h, _) in &inc[off[vi]..off[vi + 1]] {
-                            if mark[h as usize] != epoch {
-                                mark[h as usize] = epoch;
-                                dirty.push(h);
-                            }
-                        }
-                    }
-                }
-            }
-        }
+        let (next, sj_next, moved, put_back) = apply_moves(
+            hex,
+            &proposal,
+            (&off, &inc),
+            &sj,
+            tau,
+            (&mut mark, &mut epoch),
+        );
         for &v in &moved {
             let vi = v as usize;
             if put_back[vi] {
@@ -709,57 +804,7 @@ pub fn relax(
         sj = sj_next;
     }
 
-    // 5: hexahedra still inverted are untangled: first with the boundary held, then with
-    // the surface vertices sliding in their tangent planes and projected back onto the
-    // surface; a round is kept only when it leaves fewer hexahedra inverted.
-    for round in 0..UNTANGLE_ROUNDS {
-        let inverted = summary(&sj).2;
-        if inverted == 0 {
-            break;
-        }
-        let freedom: Vec<Freedom> = (0..nv)
-            .map(|v| match kind[v] {
-                Kind::Interior => Freedom::Free,
-                Kind::Fixed => Freedom::Fixed,
-                Kind::Surface if round == 0 => Freedom::Fixed,
-                Kind::Surface => {
-                    let n = normals[v].iter().fold([0.0; 3], |a, &b| add(a, b));
-                    let l = dot(n, n).sqrt();
-                    if l > 0.0 {
-                        Freedom::Plane(scale(n, 1.0 / l))
-                    } else {
-                        Freedom::Fixed
-                    }
-                }
-            })
-            .collect();
-        let before = hex.verts.clone();
-        let r = untangle_hexes(
-            &mut hex.verts,
-            &hex.hexes,
-            &freedom,
-            &UntangleParams::default(),
-        );
-        for v in 0..nv {
-            if kind[v] == Kind::Surface
-                && hex.verts[v] != before[v]
-                && let Some(q) = project(v, hex.verts[v])
-            {
-                hex.verts[v] = q;
-            }
-        }
-        let untangled: Vec<f64> = (0..nh)
-            .into_par_iter()
-            .map(|k| sj_of(&hex.verts, k))
-            .collect();
-        let worse = summary(&untangled).2 >= inverted;
-        report.untangle = Some(r);
-        if worse {
-            hex.verts = before;
-            break;
-        }
-        sj = untangled;
-    }
+    untangle_rounds(hex, &kind, &normals, &project, &mut sj, &mut report);
 
     let (min1, mean1, bad1) = summary(&sj);
     report.min_sj_after = min1;
@@ -778,280 +823,4 @@ pub fn relax(
 }
 
 #[cfg(test)]
-pub(crate) mod tests {
-    use super::*;
-    use crate::extract::{extract, fixtures};
-    use rand::{Rng, SeedableRng};
-
-    /// The `n³` grid of cubes of side `1/n` on the unit box, vertex `(i, j, k)` at index
-    /// `i + (n+1)(j + (n+1)k)`.
-    pub(crate) fn grid(n: usize) -> HexMesh {
-        let id = |i: usize, j: usize, k: usize| (i + (n + 1) * (j + (n + 1) * k)) as u32;
-        let h = 1.0 / n as f64;
-        let mut verts = Vec::new();
-        for k in 0..=n {
-            for j in 0..=n {
-                for i in 0..=n {
-                    verts.push([i as f64 * h, j as f64 * h, k as f64 * h]);
-                }
-            }
-        }
-        let mut hexes = Vec::new();
-        for k in 0..n {
-            for j in 0..n {
-                for i in 0..n {
-                    hexes.push([
-                        id(i, j, k),
-                        id(i + 1, j, k),
-                        id(i + 1, j + 1, k),
-                        id(i, j + 1, k),
-                        id(i, j, k + 1),
-                        id(i + 1, j, k + 1),
-                        id(i + 1, j + 1, k + 1),
-                        id(i, j + 1, k + 1),
-                    ]);
-                }
-            }
-        }
-        HexMesh { verts, hexes }
-    }
-
-    /// The unit box's surface, each face an `m × m` grid of squares split in two triangles.
-    fn box_surface(m: usize) -> (Vec<[f64; 3]>, Vec<[u32; 3]>) {
-        let (mut verts, mut tris) = (Vec::new(), Vec::new());
-        for axis in 0..3 {
-            for side in [0.0, 1.0] {
-                let base = verts.len() as u32;
-                for b in 0..=m {
-                    for a in 0..=m {
-                        let mut p = [0.0; 3];
-                        p[axis] = side;
-                        p[(axis + 1) % 3] = a as f64 / m as f64;
-                        p[(axis + 2) % 3] = b as f64 / m as f64;
-                        verts.push(p);
-                    }
-                }
-                let id = |a: usize, b: usize| base + (a + (m + 1) * b) as u32;
-                for b in 0..m {
-                    for a in 0..m {
-                        tris.push([id(a, b), id(a + 1, b), id(a + 1, b + 1)]);
-                        tris.push([id(a, b), id(a + 1, b + 1), id(a, b + 1)]);
-                    }
-                }
-            }
-        }
-        (verts, tris)
-    }
-
-    /// Distance from `p` to the triangles, by brute force.
-    fn brute_distance(p: [f64; 3], verts: &[[f64; 3]], tris: &[[u32; 3]]) -> f64 {
-        tris.iter()
-            .map(|t| {
-                let [a, b, c] = t.map(|v| verts[v as usize]);
-                dist2(p, closest_on_triangle(p, a, b, c)).sqrt()
-            })
-            .fold(f64::INFINITY, f64::min)
-    }
-
-    /// A grid with interior vertices jittered in space and face vertices within their face.
-    fn jittered(n: usize, amount: f64, seed: u64) -> HexMesh {
-        let mut m = grid(n);
-        let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);
-        let h = 1.0 / n as f64;
-        for p in m.verts.iter_mut() {
-            let on = |c: f64| c.abs() < 1e-12 || (c - 1.0).abs() < 1e-12;
-            let bound = p.iter().filter(|&&c| on(c)).count();
-            if bound <= 1 {
-                for c in p.iter_mut() {
-                    if !on(*c) {
-                        *c += rng.random_range(-amount..amount) * h;
-                    }
-                }
-            }
-        }
-        m
-    }
-
-    fn all_sj(m: &HexMesh) -> Vec<f64> {
-        (0..m.hexes.len())
-            .map(|k| hex_scaled_jacobian(&corners(&m.verts, &m.hexes[k])))
-            .collect()
-    }
-
-    #[test]
-    fn ideal_cube_of_a_rotated_scaled_cube_is_itself() {
-        let (a, b) = (0.7f64, -0.4f64);
-        let r = [
-            [a.cos() * b.cos(), -a.sin(), a.cos() * b.sin()],
-            [a.sin() * b.cos(), a.cos(), a.sin() * b.sin()],
-            [-b.sin(), 0.0, b.cos()],
-        ];
-        let x = CUBE.map(|c| [0, 1, 2].map(|i| 2.5 * dot(r[i], c) + [1.0, -2.0, 0.5][i]));
-        let y = ideal_cube(&x);
-        for i in 0..8 {
-            assert!(dist2(x[i], y[i]) < 1e-24);
-        }
-        // An inverted cube (mirrored) is fitted by a positively oriented one.
-        let mirrored = x.map(|p| [-p[0], p[1], p[2]]);
-        assert!(hex_scaled_jacobian(&mirrored) < 0.0);
-        assert!(hex_scaled_jacobian(&ideal_cube(&mirrored)) > 0.99);
-    }
-
-    #[test]
-    fn bvh_closest_point_matches_brute_force() {
-        let mut rng = rand_pcg::Pcg64::seed_from_u64(3);
-        let verts: Vec<[f64; 3]> = (0..300)
-            .map(|_| [0; 3].map(|_: i32| rng.random_range(-1.0..1.0)))
-            .collect();
-        let tris: Vec<[u32; 3]> = (0..200)
-            .map(|_| [0; 3].map(|_: i32| rng.random_range(0..300u32)))
-            .collect();
-        let bvh = Bvh::new(&verts, &tris);
-        for _ in 0..300 {
-            let p = [0; 3].map(|_: i32| rng.random_range(-1.5..1.5));
-            let (q, d2) = bvh.closest(p).unwrap();
-            let want = brute_distance(p, &verts, &tris);
-            assert!((d2.sqrt() - want).abs() < 1e-12, "{} vs {want}", d2.sqrt());
-            assert!((dist2(p, q).sqrt() - want).abs() < 1e-12);
-        }
-        assert!(Bvh::new(&verts, &[]).closest([0.0; 3]).is_none());
-    }
-
-    #[test]
-    fn a_vertex_in_a_thin_slab_keeps_to_its_side() {
-        // A slab 0.1 thick (top at z = 0.1 facing up, bottom at z = 0 facing down) and a
-        // vertex just below the middle: the nearest face is the bottom, but a vertex whose
-        // quadrilaterals face up goes to the top.
-        let verts = vec![
-            [-1.0, -1.0, 0.0],
-            [1.0, -1.0, 0.0],
-            [1.0, 1.0, 0.0],
-            [-1.0, -1.0, 0.1],
-            [1.0, -1.0, 0.1],
-            [1.0, 1.0, 0.1],
-        ];
-        let tris = vec![[0, 2, 1], [3, 4, 5]];
-        let bvh = Bvh::new(&verts, &tris);
-        let p = [0.5, 0.0, 0.04];
-        let (q, _) = bvh.closest(p).unwrap();
-        assert!(q[2].abs() < 1e-12, "{q:?}");
-        let (q, d2) = bvh.closest_facing(p, [0.0, 0.0, 1.0]).unwrap();
-        assert!(
-            (q[2] - 0.1).abs() < 1e-12 && (d2 - 0.06 * 0.06).abs() < 1e-12,
-            "{q:?}"
-        );
-        let (q, _) = bvh.closest_facing(p, [0.0, 0.0, -1.0]).unwrap();
-        assert!(q[2].abs() < 1e-12, "{q:?}");
-        // Nothing faces sideways.
-        assert!(bvh.closest_facing(p, [1.0, 0.0, 0.0]).is_none());
-    }
-
-    #[test]
-    fn a_regular_grid_is_a_fixed_point() {
-        let mut m = grid(3);
-        let before = m.clone();
-        let (bv, bt) = box_surface(2);
-        let rep = relax(&mut m, &bv, &bt, &RelaxParams::default());
-        assert!(rep.converged && rep.iterations == 1, "{rep:?}");
-        assert_eq!(m, before);
-        assert!((rep.min_sj_after - 1.0).abs() < 1e-12);
-    }
-
-    #[test]
-    fn jittered_grid_relaxes_with_boundary_on_the_surface() {
-        let n = 4;
-        let mut m = jittered(n, 0.3, 17);
-        let start = m.clone();
-        let sj0 = all_sj(&m);
-        assert!(sj0.iter().all(|&s| s > 0.0));
-        let (bv, bt) = box_surface(3);
-        let params = RelaxParams {
-            iterations: 60,
-            ..RelaxParams::default()
-        };
-        let rep = relax(&mut m, &bv, &bt, &params);
-        let sj1 = all_sj(&m);
-        assert!(rep.min_sj_after > rep.min_sj_before + 0.1, "{rep:?}");
-        assert!(rep.mean_sj_after > rep.mean_sj_before, "{rep:?}");
-        assert!(
-            rep.cube_misfit_after < 0.5 * rep.cube_misfit_before,
-            "{rep:?}"
-        );
-        assert_eq!(rep.inverted_after, 0);
-        assert!(sj1.iter().all(|&s| s > 0.0));
-        let min1 = sj1.iter().copied().fold(f64::INFINITY, f64::min);
-        assert_eq!(min1, rep.min_sj_after);
-        // (n-1)² face vertices per face slide on the surface; edges and corners stay.
-        assert_eq!(rep.surface_vertices, 6 * (n - 1) * (n - 1));
-        assert_eq!(rep.interior_vertices, (n - 1).pow(3));
-        let diag = 3f64.sqrt();
-        for (v, p) in m.verts.iter().enumerate() {
-            let on = p.iter().any(|&c| c.abs() < 1e-6 || (c - 1.0).abs() < 1e-6);
-            let was_on = start.verts[v]
-                .iter()
-                .any(|&c| c.abs() < 1e-12 || (c - 1.0).abs() < 1e-12);
-            assert_eq!(on, was_on, "vertex {v} at {p:?}");
-            if was_on {
-                assert!(brute_distance(*p, &bv, &bt) <= 1e-9 * diag);
-            }
-        }
-        assert!(rep.max_surface_distance <= 1e-9 * diag);
-        // Deterministic, for any thread count.
-        let again = rayon::ThreadPoolBuilder::new()
-            .num_threads(1)
-            .build()
-            .unwrap()
-            .install(|| {
-                let mut m2 = start.clone();
-                let r2 = relax(&mut m2, &bv, &bt, &params);
-                (m2, r2)
-            });
-        assert_eq!(again.0, m);
-        assert_eq!(again.1, rep);
-    }
-
-    #[test]
-    fn an_inverted_hex_does_not_spread() {
-        let mut m = grid(3);
-        // Push interior vertex (1, 1, 1) through its neighbours.
-        let v = 1 + 4 * (1 + 4);
-        m.verts[v] = [0.58, 0.55, 0.6];
-        let sj0 = all_sj(&m);
-        let bad0 = sj0.iter().filter(|&&s| s <= 0.0).count();
-        assert!(bad0 > 0);
-        let (bv, bt) = box_surface(1);
-        let rep = relax(&mut m, &bv, &bt, &RelaxParams::default());
-        assert_eq!(rep.inverted_before, bad0);
-        assert!(rep.inverted_after <= bad0, "{rep:?}");
-        // Here the fitted cubes pull the pushed vertex back: the mesh untangles.
-        assert_eq!(rep.inverted_after, 0, "{rep:?}");
-        assert!(rep.min_sj_after > 0.9, "{rep:?}");
-        assert!(rep.min_sj_after >= rep.min_sj_before);
-        // No hex that was valid is inverted now.
-        let sj1 = all_sj(&m);
-        for k in 0..sj0.len() {
-            if sj0[k] > 0.0 {
-                assert!(sj1[k] > 0.0, "hex {k}: {} -> {}", sj0[k], sj1[k]);
-            }
-        }
-    }
-
-    #[test]
-    fn extracted_singular_prism_relaxes_on_its_surface() {
-        let (mesh, map) = fixtures::singular_prism(3, 2.0, 2);
-        let topo = crate::topology::check_tets(&mesh).unwrap();
-        let tris = topo.boundary_triangles(&mesh);
-        let (mut hex, _) = extract(&mesh, &map).unwrap();
-        let rep = relax(&mut hex, &mesh.verts, &tris, &RelaxParams::default());
-        // The smallest scaled Jacobian, sin 60° at the prism's fixed 60° edges, cannot
-        // improve; the hexes get closer to cubes without any getting worse than it.
-        assert!(rep.min_sj_after >= rep.min_sj_before, "{rep:?}");
-        assert!(
-            rep.cube_misfit_after < 0.95 * rep.cube_misfit_before,
-            "{rep:?}"
-        );
-        assert_eq!(rep.inverted_after, 0);
-        assert!(rep.surface_vertices > 0);
-        assert!(rep.max_surface_distance <= 1e-9);
-    }
-}
+pub(crate) mod tests;

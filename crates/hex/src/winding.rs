@@ -98,6 +98,7 @@
 //! Evaluation is sequential per point and sums in a fixed order, so results do not depend on
 //! the thread count of a caller that evaluates points in parallel.
 
+use crate::geom::vec::{cross, dot, norm, sub};
 use std::f64::consts::PI;
 
 /// Most triangles in a leaf of the hierarchy.
@@ -139,23 +140,6 @@ pub struct WindingNumber {
     nodes: Vec<Node>,
     beta: f64,
     order: u8,
-}
-
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-fn norm(a: [f64; 3]) -> f64 {
-    dot(a, a).sqrt()
 }
 
 /// The signed solid angle triangle `t` subtends at `p` (Van Oosterom–Strackee), in
