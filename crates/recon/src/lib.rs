@@ -18,8 +18,8 @@
 //!    by it in every solve below, so that a part sampled 16 times more sparsely than the rest
 //!    makes the field jump as much and sits at the same iso-value.
 //! 1. A **coarse global solve** on the cube's `(N/r)³` coarse voxels (a Gaussian of σ coarse
-//!    voxels, [`screen::Smoothing`]: every grid's own σ, at least 0.4 of the samples'
-//!    spacing on it where they are sparse against it, [`screen::sparse_floor_voxels`]),
+//!    voxels, [`weight::Smoothing`]: every grid's own σ, at least 0.4 of the samples'
+//!    spacing on it where they are sparse against it, [`weight::sparse_floor_voxels`]),
 //!    padded on each side so that the periodic solve never wraps the surface: 4 coarse
 //!    voxels, plus what rounding the grid up to a 5-smooth size for the FFT adds (so 4 to 56
 //!    coarse voxels at the supported depths, [`Plan::coarse_pad`]). Coarse node `J`
@@ -69,7 +69,7 @@
 //! Every solve of the scheme, the coarse global one and both of each leaf, is **screened**
 //! (Kazhdan & Hoppe 2013, [`screen`]) with the weight `--point-weight` relative to its own
 //! grid (by default and under `auto`, one weight per run chosen from the samples' measured
-//! noise by the coarse pass, [`screen::PointWeight`]): the samples aggregated per voxel of that grid
+//! noise by the coarse pass, [`weight::PointWeight`]): the samples aggregated per voxel of that grid
 //! pull the field to one value, which restores the short wavelengths the Gaussian and the
 //! splat attenuate (about `exp(−2π²σ²/λ²)` for a wavelength of `λ` voxels). The coarse
 //! global solve aggregates the samples as the splat pass streams them, one entry per
@@ -106,18 +106,20 @@ pub mod fft_solve;
 pub mod global;
 pub mod gpu_solve;
 pub mod leaf;
+pub mod noise;
 pub mod plan;
 pub mod pou;
 pub mod screen;
 pub mod surface;
 pub mod voxel_sum;
+pub mod weight;
 
 pub use blend::{blend_block, leaves_near, tile_blend};
 pub use coarse::{CoarseField, CoarseGrid, Level, Moments};
 pub use global::{GlobalField, global_field};
 pub use leaf::{LeafDetail, LeafPoints, LeafSolvers, coarse_error, coarse_only, solve_leaf};
 pub use plan::{DEFAULT_ERROR, DEFAULT_MIN_POINTS, DEPTHS, Plan, PlanBudget};
-pub use screen::{PointWeight, Smoothing};
+pub use weight::{PointWeight, Smoothing};
 
 use crate::types::CellKey;
 

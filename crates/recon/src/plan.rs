@@ -149,7 +149,7 @@ pub struct Plan {
     /// Smoothing width of the coarse local solves, in coarse voxels: the width the coarse
     /// field (the level above, or the dense solve) was solved with, which the coarse local
     /// solve stands in for. Equal to `sigma_vox` but where sparse samples widen each grid's
-    /// Gaussian by its own spacing ([`crate::screen::sparse_floor_voxels`]).
+    /// Gaussian by its own spacing ([`crate::weight::sparse_floor_voxels`]).
     #[serde(default)]
     pub coarse_sigma_vox: f64,
     /// Screening weight α (`--point-weight`; 0: the unscreened solve), see
@@ -157,7 +157,7 @@ pub struct Plan {
     #[serde(default)]
     pub point_weight: f64,
     /// The noise the vertex fit allows for, in fine voxels
-    /// ([`crate::screen::NoiseStats::fit_noise_voxels`]; `None` before the coarse pass,
+    /// ([`crate::noise::NoiseStats::fit_noise_voxels`]; `None` before the coarse pass,
     /// or where nothing was measured).
     #[serde(default)]
     pub fit_noise_voxels: Option<f64>,

@@ -69,7 +69,7 @@
 //! which neither the plane nor the jet can follow), the error at the vertex is of the order
 //! of the residuals rather than of their mean, so `se` is at least the residuals' spread
 //! beyond the samples' measured noise ([`fit`]'s `MISFIT_SHARE`, `NOISE_SPAN`; the noise is
-//! [`crate::screen::NoiseStats::fit_noise_voxels`], read from pairs of close samples
+//! [`crate::noise::NoiseStats::fit_noise_voxels`], read from pairs of close samples
 //! where they are not precise): there the screened field, already through the samples, is
 //! kept (a precise relief of 8 voxels' wavelength: 5.5·10⁻⁴ with half the spread, 4.9·10⁻⁴
 //! with all of it), while residuals that noise explains leave the fit as it was. Noisy
