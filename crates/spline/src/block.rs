@@ -103,6 +103,49 @@ pub fn solve_block(
         start = end;
     }
     // Fairness over the leaves inside rect: the free-free block and the free-fixed coupling.
+    let (mut fair, coupling) = fairness(h, coef, local, rect, reference, n, &mut sup, &mut lb);
+    let ta = data.trace();
+    let tf = fair.trace();
+    let s = if tf > 0.0 { ta / tf } else { 1.0 };
+    let w = omega * s;
+    for (r, c) in rhs.iter_mut().zip(&coupling) {
+        for x in 0..3 {
+            r[x] -= w * c[x];
+        }
+    }
+    data.add_scaled(&fair, w);
+    let solved = match cholesky(&mut data, &rhs) {
+        Ok(c) if c.iter().all(|c| c.iter().all(|x| x.is_finite())) => c,
+        _ => {
+            let ridge = 1e-12 * ta.max(1e-300) / n as f64;
+            for i in 0..n {
+                data.push(i, i, ridge);
+            }
+            cholesky(&mut data, &rhs).map_err(FitError::Solve)?
+        }
+    };
+    for (&f, c) in free.iter().zip(solved) {
+        coef[f as usize] = c;
+        local[f as usize] = u32::MAX;
+    }
+    Ok(())
+}
+
+/// The fairness term of a block of `n` free functions (`local`: their local indices, or
+/// `u32::MAX` for fixed ones) over the leaf cells inside `rect`: the free-free block and
+/// the coupling to the fixed coefficients of `coef`, both before the scale `ω s`. `sup` and
+/// `lb` are scratch.
+#[allow(clippy::too_many_arguments)]
+fn fairness(
+    h: &Hierarchy,
+    coef: &[[f64; 3]],
+    local: &[u32],
+    rect: [[f64; 2]; 2],
+    reference: Option<&TensorSurface>,
+    n: usize,
+    sup: &mut Vec<Support>,
+    lb: &mut LocalBasis,
+) -> (Triplets, Vec<[f64; 3]>) {
     let mut fair = Triplets::new(n);
     let mut coupling = vec![[0.0f64; 3]; n];
     for leaf in h.leaves() {
@@ -115,7 +158,7 @@ pub fn solve_block(
         {
             continue;
         }
-        h.supports(leaf, &mut sup);
+        h.supports(leaf, sup);
         if sup.iter().all(|s| local[s.index as usize] == u32::MAX) {
             continue;
         }
@@ -123,7 +166,7 @@ pub fn solve_block(
         for &(gu, wu) in &GAUSS4 {
             for &(gv, wv) in &GAUSS4 {
                 let q = [lo[0] + gu * hl, lo[1] + gv * hl];
-                h.local_basis(leaf, q, &mut lb);
+                h.local_basis(leaf, q, lb);
                 let refd = reference.map(|s| super::tensor::eval(s, q));
                 let (m, area) = metric(refd.as_ref().map(|d| (&d[1], &d[2])));
                 let w = wu * wv * hl * hl * area;
@@ -154,29 +197,5 @@ pub fn solve_block(
             }
         }
     }
-    let ta = data.trace();
-    let tf = fair.trace();
-    let s = if tf > 0.0 { ta / tf } else { 1.0 };
-    let w = omega * s;
-    for (r, c) in rhs.iter_mut().zip(&coupling) {
-        for x in 0..3 {
-            r[x] -= w * c[x];
-        }
-    }
-    data.add_scaled(&fair, w);
-    let solved = match cholesky(&mut data, &rhs) {
-        Ok(c) if c.iter().all(|c| c.iter().all(|x| x.is_finite())) => c,
-        _ => {
-            let ridge = 1e-12 * ta.max(1e-300) / n as f64;
-            for i in 0..n {
-                data.push(i, i, ridge);
-            }
-            cholesky(&mut data, &rhs).map_err(FitError::Solve)?
-        }
-    };
-    for (&f, c) in free.iter().zip(solved) {
-        coef[f as usize] = c;
-        local[f as usize] = u32::MAX;
-    }
-    Ok(())
+    (fair, coupling)
 }
