@@ -22,5 +22,5 @@ pub mod geom;
 pub mod sparse;
 pub mod types;
 
-pub use error::{Error, Location, Result};
+pub use error::{Error, Location, Result, Setting};
 pub use types::{Aabb, Attributes, CellKey, Cube, PointBatch, Rigid};

@@ -61,7 +61,7 @@ pub mod xyz;
 
 use std::path::{Path, PathBuf};
 
-use crate::error::{Error, Location, Result};
+use crate::error::{Error, Location, Result, Setting};
 use crate::types::{Attributes, PointBatch, Rigid, Viewpoint};
 
 /// The formats scanflow reads.
@@ -347,7 +347,8 @@ pub fn invalid_coordinate_msg(p: [f64; 3]) -> Option<String> {
         .zip(p)
         .find(|(_, v)| !v.is_finite())?;
     Some(format!(
-        "{axis} is {v}, expected a finite coordinate (use --skip-invalid to drop such points)"
+        "{axis} is {v}, expected a finite coordinate (use {} to drop such points)",
+        Setting::SkipInvalid
     ))
 }
 
@@ -388,23 +389,23 @@ fn invalid_point_detail(p: [f64; 3], normal: Option<[f64; 3]>) -> Option<String>
 /// What is wrong with a point's normal `n` (as read, before it is narrowed to the store's
 /// float32), if anything: a component that is NaN, infinite or beyond float32's range, or a
 /// normal of zero length (after narrowing), which orients nothing and would splat nothing.
-/// The message names the component and suggests `--skip-invalid`.
+/// The message names the component and suggests [`Setting::SkipInvalid`].
 #[inline]
 pub fn invalid_normal_msg(n: [f64; 3]) -> Option<String> {
-    const HINT: &str = "(use --skip-invalid to drop such points)";
+    let hint = format!("(use {} to drop such points)", Setting::SkipInvalid);
     for (name, v) in ["nx", "ny", "nz"].into_iter().zip(n) {
         if !v.is_finite() {
-            return Some(format!("{name} is {v}, expected a finite normal {HINT}"));
+            return Some(format!("{name} is {v}, expected a finite normal {hint}"));
         }
         if !(v as f32).is_finite() {
             return Some(format!(
-                "{name} is {v:e}, beyond float32's range, expected a finite normal {HINT}"
+                "{name} is {v:e}, beyond float32's range, expected a finite normal {hint}"
             ));
         }
     }
     if n.iter().all(|&v| v as f32 == 0.0) {
         return Some(format!(
-            "normal is zero ({}, {}, {}), expected a nonzero normal {HINT}",
+            "normal is zero ({}, {}, {}), expected a nonzero normal {hint}",
             n[0], n[1], n[2]
         ));
     }

@@ -18,6 +18,17 @@
 /// frame[2]`). A frame field holds one per tetrahedron.
 pub type Frame = [[f64; 3]; 3];
 
+/// The 6 faces of a hexahedron, each counter-clockwise seen from outside (outward normal by
+/// the right-hand rule), in Verdict's order: `y = 0`, `x = 1`, `y = 1`, `x = 0`, bottom, top.
+pub const HEX_FACES: [[usize; 4]; 6] = [
+    [0, 1, 5, 4],
+    [1, 2, 6, 5],
+    [2, 3, 7, 6],
+    [3, 0, 4, 7],
+    [3, 2, 1, 0],
+    [4, 5, 6, 7],
+];
+
 /// A tetrahedral mesh.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct TetMesh {
@@ -115,7 +126,6 @@ impl HexMesh {
     /// at it, in [`HexMesh::boundary_quads`]' order; a zero vector for a collapsed one. Empty
     /// for a vertex off the boundary.
     pub fn boundary_normals(&self) -> Vec<Vec<[f64; 3]>> {
-        use super::quality::HEX_FACES;
         use crate::geom::vec::{norm, scale};
         let mut normals = vec![Vec::new(); self.verts.len()];
         for (h, f) in self.boundary_quads() {
@@ -131,9 +141,8 @@ impl HexMesh {
     }
 
     /// The boundary quadrilaterals (faces of exactly one hexahedron) as (hexahedron, local
-    /// face of [`super::quality::HEX_FACES`], outward), sorted.
+    /// face of [`HEX_FACES`], outward), sorted.
     pub fn boundary_quads(&self) -> Vec<(u32, u8)> {
-        use super::quality::HEX_FACES;
         let mut faces: Vec<([u32; 4], u32, u8)> = Vec::with_capacity(6 * self.hexes.len());
         for (h, hex) in self.hexes.iter().enumerate() {
             for (f, face) in HEX_FACES.iter().enumerate() {

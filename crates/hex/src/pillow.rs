@@ -16,7 +16,7 @@
 //! defined.
 
 use super::mesh::{HexMesh, quad_normal};
-use super::quality::HEX_FACES;
+use super::mesh::HEX_FACES;
 use crate::geom::vec::{add, dot, scale, sub};
 
 /// How far an inner copy starts from its boundary vertex, as a fraction of the way to the

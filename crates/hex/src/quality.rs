@@ -55,6 +55,7 @@
 //! them for a reader, and both structures serialise to JSON.
 
 use crate::geom::vec::{add, cross, dot, norm, sub};
+pub use crate::mesh::HEX_FACES;
 use crate::mesh::{FACE_OPPOSITE, HexMesh};
 use crate::topology::TET_EDGES;
 use rayon::prelude::*;
@@ -75,17 +76,6 @@ pub const HEX_EDGES: [[usize; 2]; 12] = [
     [1, 5],
     [2, 6],
     [3, 7],
-];
-
-/// The 6 faces of a hexahedron, each counter-clockwise seen from outside (outward normal by
-/// the right-hand rule), in Verdict's order: `y = 0`, `x = 1`, `y = 1`, `x = 0`, bottom, top.
-pub const HEX_FACES: [[usize; 4]; 6] = [
-    [0, 1, 5, 4],
-    [1, 2, 6, 5],
-    [2, 3, 7, 6],
-    [3, 0, 4, 7],
-    [3, 2, 1, 0],
-    [4, 5, 6, 7],
 ];
 
 /// For each corner `i`, `[i, p, q, r]`: the Jacobian at corner `i` is

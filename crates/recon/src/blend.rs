@@ -1,13 +1,11 @@
-//! A tile's field as a blend of the coarse solution and the leaf details (step 3 of the
-//! two-level scheme), and which leaves reach a tile.
+//! Which leaves reach a block of fine nodes: those whose detail support (cell plus overlap)
+//! meets it. The blend itself reads a level's coarse field, so it lives with that field
+//! ([`super::coarse::blend_block`]).
 
 use std::collections::BTreeSet;
-use std::sync::Arc;
 
-use super::coarse::CoarseField;
 use super::plan::Plan;
-use crate::error::Result;
-use crate::types::{Blend, CellKey, Detail, Leaf};
+use crate::types::CellKey;
 
 /// Leaves whose detail support (cell plus overlap) meets fine nodes `lo..=hi`.
 pub fn leaves_near(
@@ -34,55 +32,4 @@ pub fn leaves_near(
     }
     out.sort();
     out
-}
-
-/// A tile's `(T+1)³` nodes from fine node `lo` as a blend ([`Blend`]) of the coarse solution
-/// and the leaf details `details` (fixed point in `unit`), with per-axis leaf weights `own`
-/// ([`super::pou::leaf_weights`]). The extraction stage evaluates it (on the CPU or the GPU).
-pub fn tile_blend<'a>(
-    plan: &Plan,
-    own: &[i32],
-    coarse: &CoarseField,
-    unit: f32,
-    lo: [i64; 3],
-    details: &'a [(CellKey, Arc<Detail>)],
-) -> Result<Blend<'a>> {
-    let dims = [(plan.tile + 1) as usize; 3];
-    blend_block(plan, own, coarse, unit, lo, dims, details)
-}
-
-/// [`tile_blend`] for any block of `dims` nodes from fine node `lo` (a level of the recursive
-/// scheme blends the windows the level below reads, [`CoarseField::local`]). Reading the
-/// coarse values of a level above fails only on its leaves' checkpoints.
-pub fn blend_block<'a>(
-    plan: &Plan,
-    own: &[i32],
-    coarse: &CoarseField,
-    unit: f32,
-    lo: [i64; 3],
-    dims: [usize; 3],
-    details: &'a [(CellKey, Arc<Detail>)],
-) -> Result<Blend<'a>> {
-    let (cvals, coarse_dims, axes) = coarse.block(lo, dims, unit)?;
-    Ok(Blend {
-        lo,
-        dims,
-        axes,
-        coarse: cvals,
-        coarse_dims,
-        coarse_bits: plan.coarse_ratio.trailing_zeros(),
-        e: plan.leaf_voxels as i64,
-        ov: plan.overlap_voxels as i64,
-        own: own.to_vec(),
-        unit,
-        leaves: details
-            .iter()
-            .map(|(k, d)| Leaf {
-                cell: k.decode().1.map(|v| v as i64),
-                id: k.0,
-                detail: &d.values,
-                shift: d.shift,
-            })
-            .collect(),
-    })
 }

@@ -9,11 +9,10 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use super::density::DensityBox;
-use super::fft_solve::SplatBox;
-use super::leaf::LeafDetail;
+use super::grid::SplatBox;
 use super::noise::{JetStats, NoiseStats, PairStats};
 use super::screen::{SCREEN_PART_ENTRY_BYTES, ScreenPart};
-use crate::error::{Error, IoContext, Result};
+use crate::error::{Error, IoContext, Result, Setting};
 use crate::fs::atomic::{self, Durability};
 use crate::fs::le::{LeReader, LeWriter};
 use crate::types::{CellKey, Detail, EdgeKey, MAX_SHIFT, TileMesh};
@@ -38,6 +37,22 @@ pub fn leaf_path(dir: &Path, key: CellKey) -> PathBuf {
 fn detail_len(m: usize) -> usize {
     let n = m * m * m;
     n + n % 2
+}
+
+/// What a leaf checkpoint holds, as the leaf's solve made it: its detail grid in the
+/// blend's fixed point (none for a leaf left to the coarse solution) and its share of the
+/// iso-value.
+#[derive(Debug)]
+pub struct LeafDetail {
+    /// The detail, `detail_n³` nodes (none: the leaf is left to the coarse solution).
+    pub detail: Option<Detail>,
+    /// Sum of the field at the cell's samples.
+    pub iso_sum: f64,
+    /// Number of the cell's samples.
+    pub iso_count: u64,
+    /// Conjugate-gradient iterations of the leaf's screened fine solve (0 for a leaf left to
+    /// the coarse solution, or read back from a checkpoint).
+    pub iterations: u32,
 }
 
 /// Checkpoint leaf `key`'s detail `d` in directory `dir`.
@@ -127,9 +142,10 @@ fn leaf_header(path: &Path, raw: &[u8], key: CellKey) -> Result<LeafSummary> {
         return Err(Error::input(
             path,
             format!(
-                "leaf checkpoint written by another version of scanflow ({}; this one reads {}): run again without --resume in a new work directory",
+                "leaf checkpoint written by another version of scanflow ({}; this one reads {}): run again without {} in a new work directory",
                 String::from_utf8_lossy(&raw[..8]),
-                String::from_utf8_lossy(LEAF_MAGIC)
+                String::from_utf8_lossy(LEAF_MAGIC),
+                Setting::Resume
             ),
         ));
     }
@@ -237,9 +253,10 @@ pub fn read_tile(path: &Path) -> Result<TileMesh> {
         return Err(Error::input(
             path,
             format!(
-                "tile checkpoint written by another version of scanflow ({}; this one reads {}): run again without --resume in a new work directory",
+                "tile checkpoint written by another version of scanflow ({}; this one reads {}): run again without {} in a new work directory",
                 String::from_utf8_lossy(&raw[..8]),
-                String::from_utf8_lossy(TILE_MAGIC)
+                String::from_utf8_lossy(TILE_MAGIC),
+                Setting::Resume
             ),
         ));
     }

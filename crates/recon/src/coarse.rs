@@ -1,20 +1,23 @@
 //! The coarse solution a level of leaves refines (step 1 of the two-level scheme, and the
-//! levels above in the recursive scheme) and the check that the input spans a volume.
+//! levels above in the recursive scheme), the blend of a block's field from it and the leaf
+//! details (step 3: [`tile_blend`], [`blend_block`]), and the check that the input spans a
+//! volume. The field and the blend are one recursion: a level above the dense solve is read
+//! through the blend of its own coarse field and details.
 
 use std::borrow::Cow;
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 
-use super::blend::{blend_block, leaves_near};
+use super::blend::leaves_near;
 use super::checkpoint::leaf_detail;
-use super::fft_solve::LocalGrid;
+use super::grid::LocalGrid;
 use super::plan::Plan;
 use crate::error::{Error, Result};
 use crate::exec::cache::Lru;
 use crate::extract::field::BlendEval;
 use crate::pou::{leaf_weights, quantise};
-use crate::types::{Axis, CellKey, Detail};
+use crate::types::{Axis, Blend, CellKey, Detail, Leaf};
 
 /// Coarse values on a grid: the dense global solve of the coarsest level, or a window of a
 /// level above ([`CoarseField::local`]). Fine node `g` reads node `g/r + pad` (per axis).
@@ -382,4 +385,55 @@ impl Moments {
         }
         Ok(())
     }
+}
+
+/// A tile's `(T+1)³` nodes from fine node `lo` as a blend ([`Blend`]) of the coarse solution
+/// and the leaf details `details` (fixed point in `unit`), with per-axis leaf weights `own`
+/// ([`super::pou::leaf_weights`]). The extraction stage evaluates it (on the CPU or the GPU).
+pub fn tile_blend<'a>(
+    plan: &Plan,
+    own: &[i32],
+    coarse: &CoarseField,
+    unit: f32,
+    lo: [i64; 3],
+    details: &'a [(CellKey, Arc<Detail>)],
+) -> Result<Blend<'a>> {
+    let dims = [(plan.tile + 1) as usize; 3];
+    blend_block(plan, own, coarse, unit, lo, dims, details)
+}
+
+/// [`tile_blend`] for any block of `dims` nodes from fine node `lo` (a level of the recursive
+/// scheme blends the windows the level below reads, [`CoarseField::local`]). Reading the
+/// coarse values of a level above fails only on its leaves' checkpoints.
+pub fn blend_block<'a>(
+    plan: &Plan,
+    own: &[i32],
+    coarse: &CoarseField,
+    unit: f32,
+    lo: [i64; 3],
+    dims: [usize; 3],
+    details: &'a [(CellKey, Arc<Detail>)],
+) -> Result<Blend<'a>> {
+    let (cvals, coarse_dims, axes) = coarse.block(lo, dims, unit)?;
+    Ok(Blend {
+        lo,
+        dims,
+        axes,
+        coarse: cvals,
+        coarse_dims,
+        coarse_bits: plan.coarse_ratio.trailing_zeros(),
+        e: plan.leaf_voxels as i64,
+        ov: plan.overlap_voxels as i64,
+        own: own.to_vec(),
+        unit,
+        leaves: details
+            .iter()
+            .map(|(k, d)| Leaf {
+                cell: k.decode().1.map(|v| v as i64),
+                id: k.0,
+                detail: &d.values,
+                shift: d.shift,
+            })
+            .collect(),
+    })
 }

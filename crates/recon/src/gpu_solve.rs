@@ -75,7 +75,7 @@ use super::fft_solve::{
     splat,
 };
 use super::screen::Screen;
-use crate::error::{Error, Result};
+use crate::error::{Error, Result, Setting};
 use crate::extract::gpu::GpuMode;
 use crate::extract::gpu::adapter::{self, Trouble, describe};
 
@@ -307,7 +307,7 @@ impl GpuSolver {
         }
         let Some(ad) = best else {
             if mode == GpuMode::On {
-                return Err(adapter::none_found("--gpu-solve", &found));
+                return Err(adapter::none_found(Setting::GpuSolve, &found));
             }
             log::info!("leaf solves on the CPU: no discrete or integrated GPU (adapters: {found})");
             return Ok(None);
@@ -321,7 +321,9 @@ impl GpuSolver {
                 );
                 Ok(Some(GpuSolver::start(dev, n, name)))
             }
-            Err(e) if mode == GpuMode::On => Err(Error::Usage(format!("--gpu-solve on: {e}"))),
+            Err(e) if mode == GpuMode::On => {
+                Err(Error::Usage(format!("{} on: {e}", Setting::GpuSolve)))
+            }
             Err(e) => {
                 log::warn!("leaf solves on the CPU: {e}");
                 Ok(None)
@@ -477,7 +479,7 @@ pub fn device_identity(mode: GpuMode) -> Result<String> {
     }
     match adapter::select(mode) {
         (Some(a), _) => Ok(describe(&a.get_info())),
-        (None, found) if mode == GpuMode::On => Err(adapter::none_found("--gpu-solve", &found)),
+        (None, found) if mode == GpuMode::On => Err(adapter::none_found(Setting::GpuSolve, &found)),
         (None, _) => Ok("cpu".into()),
     }
 }

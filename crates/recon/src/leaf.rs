@@ -1,8 +1,10 @@
 //! One leaf's solve (step 2 of the two-level scheme): its fine and coarse local solves, their
 //! difference on the cell and its overlap, and the paper's refinement test.
 
+pub use super::checkpoint::LeafDetail;
 use super::coarse::CoarseGrid;
-use super::fft_solve::{LocalGrid, Solver, splat};
+use super::fft_solve::Solver;
+use super::grid::{LocalGrid, splat};
 use super::gpu_solve::{GpuSolveStats, GpuSolver};
 use super::plan::Plan;
 use super::screen::{Screen, ScreenBuilder};
@@ -77,21 +79,6 @@ impl LeafPoints {
         }
         sum
     }
-}
-
-/// A leaf's detail grid in the blend's fixed point (none for a leaf left to the coarse
-/// solution) and its share of the iso-value.
-#[derive(Debug)]
-pub struct LeafDetail {
-    /// The detail, `detail_n³` nodes (none: the leaf is left to the coarse solution).
-    pub detail: Option<Detail>,
-    /// Sum of the field at the cell's samples.
-    pub iso_sum: f64,
-    /// Number of the cell's samples.
-    pub iso_count: u64,
-    /// Conjugate-gradient iterations of the leaf's screened fine solve (0 for a leaf left to
-    /// the coarse solution, or read back from a checkpoint).
-    pub iterations: u32,
 }
 
 /// The two solvers every leaf uses: its fine grid and its coarse local grid.

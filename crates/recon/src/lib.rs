@@ -104,6 +104,7 @@ pub mod density;
 pub mod extract;
 pub mod fft_solve;
 pub mod global;
+pub mod grid;
 pub mod gpu_solve;
 pub mod leaf;
 pub mod noise;
@@ -114,7 +115,8 @@ pub mod surface;
 pub mod voxel_sum;
 pub mod weight;
 
-pub use blend::{blend_block, leaves_near, tile_blend};
+pub use blend::leaves_near;
+pub use coarse::{blend_block, tile_blend};
 pub use coarse::{CoarseField, CoarseGrid, Level, Moments};
 pub use global::{GlobalField, global_field};
 pub use leaf::{LeafDetail, LeafPoints, LeafSolvers, coarse_error, coarse_only, solve_leaf};

@@ -4,16 +4,14 @@
 use serde::{Deserialize, Serialize};
 
 use super::density::DensityGrid;
-use super::fft_solve::LocalGrid;
-use crate::error::{Error, Result};
+use super::grid::LocalGrid;
+use crate::error::{Error, Result, Setting};
 use crate::types::{CellKey, Cube};
 
 /// Peak bytes per node of a solve: the splatted normals (12) and the divergence (4).
 pub const COARSE_BYTES_PER_NODE: u64 = 16;
 
-/// Peak bytes per node of a screened solve: the conjugate gradients' five vectors (20) and
-/// the preconditioner's transform (8) ([`crate::fft_solve::Solver::solve_screened`]).
-pub const SCREENED_BYTES_PER_NODE: u64 = 28;
+pub use super::grid::SCREENED_BYTES_PER_NODE;
 
 /// Coarse voxels added to the cube's width before rounding up to a 5-smooth size: 4 on each
 /// side, so that the periodic coarse solve never wraps the surface.
@@ -367,7 +365,8 @@ pub fn levels(
 ) -> Result<Vec<Plan>> {
     if !DEPTHS.contains(&depth) {
         return Err(Error::Usage(format!(
-            "--depth {depth} is out of range: supported depths are {}..={}",
+            "{} {depth} is out of range: supported depths are {}..={}",
+            Setting::Depth,
             DEPTHS.start(),
             DEPTHS.end()
         )));

@@ -35,7 +35,7 @@
 
 use rayon::prelude::*;
 
-use super::fft_solve::LocalGrid;
+use super::grid::LocalGrid;
 use super::voxel_sum::{OnLattice, VoxelSum, screen_voxel};
 use crate::types::{KeyMap, floor, wrap};
 

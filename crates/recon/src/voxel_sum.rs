@@ -5,7 +5,7 @@
 //! **multilinear** (of degree at most one in each coordinate) within a voxel of the leaf's
 //! fine lattice:
 //!
-//! - the **splat** (Kazhdan 2005, §4; [`super::fft_solve::splat`]): sample `i` in the voxel
+//! - the **splat** (Kazhdan 2005, §4; [`super::grid::splat`]): sample `i` in the voxel
 //!   with lowest node `g` and offset `f_i ∈ [0, 1)³` adds `n_i w_c(f_i)` to node `g + c`,
 //!   `w_c(f) = Π_a (c_a ? f_a : 1 − f_a)`, for the 8 corners `c`. Summed over the voxel's
 //!   samples that is 8 vectors `N_c = Σ_i n_i w_c(f_i)`, each added to its node: the same
@@ -32,7 +32,7 @@
 //! take 16 s instead of 68; at 10M points (6 a voxel) the level costs what it did. The finest
 //! level always reads points: its iso-value and the vertex fit need them.
 
-use super::fft_solve::LocalGrid;
+use super::grid::LocalGrid;
 use crate::types::{Cube, wrap};
 
 /// The samples of one voxel of a level's lattice, summed.
@@ -140,7 +140,7 @@ pub fn sum_voxels(
 
 /// Add the summed normals of `voxels` to `v` (one `[f32; 3]` per node of `grid`, placed on
 /// the lattice by `on`) as a density: the splat of the samples they sum
-/// ([`super::fft_solve::splat`], module docs). On a grid of the lattice's own spacing each
+/// ([`super::grid::splat`], module docs). On a grid of the lattice's own spacing each
 /// corner is one node; on a coarser one, [`restrict`] the fine splat instead where it is at
 /// hand (the same sums, a tenth of the work).
 pub fn splat_voxels(grid: &LocalGrid, on: OnLattice, voxels: &[VoxelSum], v: &mut [[f32; 3]]) {
@@ -158,7 +158,7 @@ pub fn splat_voxels(grid: &LocalGrid, on: OnLattice, voxels: &[VoxelSum], v: &mu
             } else {
                 let (at, f) = on.locate(g);
                 let u = [0, 1, 2].map(|a| at[a] as f64 + f[a]);
-                super::fft_solve::splat_node(grid.n, u, *nn, scale, v);
+                super::grid::splat_node(grid.n, u, *nn, scale, v);
             }
         }
     }

@@ -34,7 +34,7 @@
 pub mod pipeline;
 
 pub use scanflow_core::{
-    Aabb, Attributes, CellKey, Cube, Error, Location, PointBatch, Result, Rigid,
+    Aabb, Attributes, CellKey, Cube, Error, Location, PointBatch, Result, Rigid, Setting,
 };
 pub use scanflow_core::{error, exec, fs, geom, sparse, types};
 pub use scanflow_formats as io;

@@ -51,7 +51,7 @@
 //! stays under the tolerance; the largest kept `r` is the band limit `b`, and the sampling
 //! theorem then asks for a sampling rate `2b` relative to the grid's Nyquist.
 
-use crate::error::{Error, Result};
+use crate::error::{Error, Result, Setting};
 
 use super::fft::{Fft2, Spectrum};
 
@@ -128,10 +128,12 @@ impl Filter {
                 }
                 match self {
                     Filter::BandStop { .. } if !(0.0..1.0).contains(&gain) => bad(format!(
-                        "gain {gain} out of range: expected [0, 1) (0 removes the band; use --enhance to amplify)"
+                        "gain {gain} out of range: expected [0, 1) (0 removes the band; use {} to amplify)",
+                        Setting::Enhance
                     )),
                     Filter::Enhance { .. } if !(gain > 1.0 && gain.is_finite()) => bad(format!(
-                        "gain {gain} out of range: expected more than 1 (use --bandstop to attenuate)"
+                        "gain {gain} out of range: expected more than 1 (use {} to attenuate)",
+                        Setting::Bandstop
                     )),
                     _ => Ok(()),
                 }

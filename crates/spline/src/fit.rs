@@ -35,6 +35,7 @@ use super::basis::GAUSS4;
 use super::hier::{Hierarchy, Leaf, LocalBasis, Support};
 use super::tensor;
 use crate::sparse::{Triplets, cholesky, factor_bytes, lu};
+use crate::error::Setting;
 use crate::types::TensorSurface;
 
 /// Which fairness energy regularises the fit (§6).
@@ -164,9 +165,14 @@ pub enum FitError {
     Solve(String),
     /// The factorisation would take more memory than the fit may use.
     #[error(
-        "the sparse factorisation of {unknowns} unknowns needs {}, more than the {} this surface may use under --mem: raise --mem, or loosen --tolerance, or lower --max-level, or split the points (--patches, --tiles)",
+        "the sparse factorisation of {unknowns} unknowns needs {}, more than the {} this surface may use under {mem}: raise {mem}, or loosen {}, or lower {}, or split the points ({}, {})",
         crate::exec::human_bytes(*need),
-        crate::exec::human_bytes(*limit)
+        crate::exec::human_bytes(*limit),
+        Setting::Tolerance,
+        Setting::MaxLevel,
+        Setting::Patches,
+        Setting::Tiles,
+        mem = Setting::Mem
     )]
     Memory {
         /// Unknowns of the system.

@@ -42,7 +42,8 @@ use kiddo::SquaredEuclidean;
 use kiddo::immutable::float::kdtree::ImmutableKdTree;
 use rayon::prelude::*;
 
-use crate::error::{Error, Result};
+use crate::error::{Error, Result, Setting};
+use crate::geom::vec::dot;
 
 /// The number of neighbours [`Graph::from_knn`] is meant to be called with by default.
 pub const DEFAULT_K: usize = 10;
@@ -72,7 +73,8 @@ pub struct Graph {
 fn not_a_disc(what: &str) -> String {
     format!(
         "{what} has no boundary: a closed surface is not a disc and cannot be fitted by one \
-         surface; use --patches to fit it in patches"
+         surface; use {} to fit it in patches",
+        Setting::Patches
     )
 }
 
@@ -259,7 +261,7 @@ fn nearest(
 /// its tangent plane; `2π` with fewer than two usable neighbours.
 fn angle_gap(points: &[[f64; 3]], i: usize, nb: &[u32]) -> f64 {
     let p = points[i];
-    let frame = super::param::pca_frame(
+    let frame = super::frame::pca_frame(
         std::iter::once(p).chain(nb.iter().map(|&j| points[j as usize])),
         nb.len() + 1,
     );
@@ -279,12 +281,6 @@ fn angle_gap(points: &[[f64; 3]], i: usize, nb: &[u32]) -> f64 {
     angles.sort_unstable_by(f64::total_cmp);
     let wrap = angles[0] + std::f64::consts::TAU - angles[angles.len() - 1];
     angles.windows(2).map(|w| w[1] - w[0]).fold(wrap, f64::max)
-}
-
-/// Dot product.
-#[inline]
-pub(super) fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
 #[cfg(test)]
@@ -341,7 +337,7 @@ mod tests {
         ];
         let e = Graph::from_triangles(src(), 6, &t).unwrap_err().to_string();
         assert!(
-            e.contains("patch.ply") && e.contains("no boundary") && e.contains("--patches"),
+            e.contains("patch.ply") && e.contains("no boundary") && e.contains("`patches`"),
             "{e}"
         );
         let e = Graph::from_triangles(src(), 5, &t).unwrap_err().to_string();
@@ -420,7 +416,7 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(
-            e.contains("patch.ply") && e.contains("no boundary") && e.contains("--patches"),
+            e.contains("patch.ply") && e.contains("no boundary") && e.contains("`patches`"),
             "{e}"
         );
     }

@@ -44,6 +44,7 @@ use scanflow_core::{error, exec, fs, geom, sparse, types};
 pub mod basis;
 pub mod block;
 pub mod fit;
+mod frame;
 pub mod graph;
 pub mod hier;
 pub mod iges;

@@ -57,9 +57,11 @@ use faer::prelude::Solve;
 use faer::sparse::{SparseColMat, Triplet};
 use faer::{Mat, Side};
 
-use super::graph::{Graph, dot};
-use crate::error::{Error, Result};
+use super::frame::{Frame, pca_frame};
+use super::graph::Graph;
+use crate::error::{Error, Result, Setting};
 use crate::geom::rect::min_area_rect;
+use crate::geom::vec::{cross, dot};
 
 /// Most stress-majorisation steps for `α > 0`.
 pub const MAX_ITERATIONS: usize = 100;
@@ -118,68 +120,6 @@ pub struct Param {
     pub iterations: usize,
 }
 
-/// An orthonormal frame through a centroid.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub(super) struct Frame {
-    /// The points' centroid.
-    pub(super) centroid: [f64; 3],
-    /// First axis, second axis, normal (right-handed).
-    pub(super) axes: [[f64; 3]; 3],
-}
-
-/// Make the largest component of `v` (the first on ties) positive.
-fn sign_rule(v: [f64; 3]) -> [f64; 3] {
-    let mut k = 0;
-    for c in 1..3 {
-        if v[c].abs() > v[k].abs() {
-            k = c;
-        }
-    }
-    if v[k] < 0.0 { [-v[0], -v[1], -v[2]] } else { v }
-}
-
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-
-/// The principal-component frame of `n` points (the module docs' sign rule).
-pub(super) fn pca_frame(points: impl Iterator<Item = [f64; 3]> + Clone, n: usize) -> Frame {
-    let inv = 1.0 / n.max(1) as f64;
-    let mut c = [0.0; 3];
-    for p in points.clone() {
-        for k in 0..3 {
-            c[k] += p[k];
-        }
-    }
-    c = c.map(|v| v * inv);
-    let mut m = nalgebra::Matrix3::<f64>::zeros();
-    for p in points {
-        let d = nalgebra::Vector3::new(p[0] - c[0], p[1] - c[1], p[2] - c[2]);
-        m += d * d.transpose();
-    }
-    let e = nalgebra::SymmetricEigen::new(m * inv);
-    let mut order = [0usize, 1, 2];
-    order.sort_by(|&a, &b| {
-        e.eigenvalues[b]
-            .total_cmp(&e.eigenvalues[a])
-            .then(a.cmp(&b))
-    });
-    let col = |k: usize| {
-        let v = e.eigenvectors.column(order[k]);
-        [v[0], v[1], v[2]]
-    };
-    let first = sign_rule(col(0));
-    let normal = sign_rule(col(2));
-    let second = cross(normal, first);
-    Frame {
-        centroid: c,
-        axes: [first, second, normal],
-    }
-}
 
 /// The frame of [`pca_frame`] turned to the plane normal to `normal` (unit): the first axis is
 /// the principal one projected into that plane (any perpendicular when it is parallel to
@@ -389,11 +329,11 @@ fn springs(
     r: f64,
 ) -> Result<(Vec<[f64; 2]>, usize, usize)> {
     if !graph.boundary.contains(&true) {
-        return Err(Error::Usage(
+        return Err(Error::Usage(format!(
             "the patch's graph has no boundary vertex: a closed surface is not a disc; use \
-             --patches to fit it in patches"
-                .to_string(),
-        ));
+             {} to fit it in patches",
+            Setting::Patches
+        )));
     }
     let (fixed, unreachable) = fixed_vertices(graph);
     let mut slot = vec![usize::MAX; points.len()];

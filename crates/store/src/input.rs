@@ -5,7 +5,7 @@
 use std::sync::atomic::{AtomicBool, AtomicU16, Ordering};
 
 use crate::cell_file::RecordLayout;
-use crate::error::{Error, Result};
+use crate::error::{Error, Result, Setting};
 use crate::io::{ChunkSpec, InputSpec, PointReader};
 use crate::manifest::InputEntry;
 use crate::types::{Aabb, Attributes, PointBatch, Viewpoint};
@@ -72,7 +72,10 @@ impl Inputs {
                 if let Some(r) = readers.iter().find(|r| !r.attributes().normal) {
                     return Err(Error::input(
                         r.path(),
-                        "has no normals (nx ny nz) and --normals use was given; use --normals auto or estimate to estimate them",
+                        format!(
+                            "has no normals (nx ny nz) and {n} use was given; use {n} auto or estimate to estimate them",
+                            n = Setting::Normals
+                        ),
                     ));
                 }
                 false
@@ -243,9 +246,10 @@ fn default_viewpoints(specs: &mut [InputSpec], readers: &[Box<dyn PointReader>])
     for (i, r) in specs.iter_mut().zip(readers) {
         if i.viewpoint.is_none() && r.format().is_las() {
             log::info!(
-                "{}: {} without --viewpoint: normals face up (+z), as seen from the air",
+                "{}: {} without {}: normals face up (+z), as seen from the air",
                 i.path.display(),
-                r.format().name()
+                r.format().name(),
+                Setting::Viewpoint
             );
             i.viewpoint = Some(Viewpoint::Direction([0.0, 0.0, 1.0]));
         }

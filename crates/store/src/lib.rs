@@ -64,7 +64,7 @@ pub mod verify;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use crate::error::{Error, IoContext, Result};
+use crate::error::{Error, IoContext, Result, Setting};
 use crate::exec::Ctx;
 use crate::exec::budget::Share;
 use crate::exec::progress::Stage;
@@ -126,7 +126,8 @@ impl std::str::FromStr for NormalsMode {
             "use" => Ok(NormalsMode::Use),
             "estimate" => Ok(NormalsMode::Estimate),
             o => Err(Error::Usage(format!(
-                "--normals \"{o}\": expected auto, use or estimate"
+                "{} \"{o}\": expected auto, use or estimate",
+                Setting::Normals
             ))),
         }
     }
@@ -306,7 +307,10 @@ impl Prepared {
     ) -> Result<Prepared> {
         let t0 = Instant::now();
         if params.max_cell_points == 0 {
-            return Err(Error::Usage("--max-cell-points must be at least 1".into()));
+            return Err(Error::Usage(format!(
+                "{} must be at least 1",
+                Setting::MaxCellPoints
+            )));
         }
         let inputs = Inputs::open(inputs, params)?;
         let params = StoreParams {
@@ -478,7 +482,10 @@ pub fn stage(inputs: &[InputSpec], out: &Path, params: &StoreParams, ctx: &Ctx) 
     if out.exists() {
         return Err(Error::input(
             out,
-            "output store already exists; remove it or choose another -o",
+            format!(
+                "output store already exists; remove it or choose another {}",
+                Setting::Output
+            ),
         ));
     }
     let prep = Prepared::open(inputs, params, ctx)?;

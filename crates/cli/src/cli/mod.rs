@@ -24,6 +24,7 @@ macro_rules! outln {
 
 pub mod args;
 pub mod config;
+pub mod flags;
 pub mod logger;
 pub mod signals;
 

@@ -120,10 +120,11 @@ pub fn for_run(threads: usize, mem: u64) -> u64 {
     }
     MIMALLOC.store(mimalloc, Ordering::Release);
     log::debug!(
-        "allocator: {} ({} threads, {} of --mem set aside)",
+        "allocator: {} ({} threads, {} of {} set aside)",
         if mimalloc { "mimalloc" } else { "glibc" },
         threads,
-        super::human_bytes(reserve)
+        super::human_bytes(reserve),
+        crate::Setting::Mem
     );
     mem - reserve
 }

@@ -11,7 +11,7 @@
 
 use std::sync::{Arc, Condvar, Mutex};
 
-use crate::error::{Error, Result};
+use crate::error::{Error, Result, Setting};
 use crate::exec::human_bytes;
 
 /// The slices of the budget that long-lived consumers size themselves by, as fractions of the
@@ -121,9 +121,10 @@ impl Budget {
     pub fn acquire(self: &Arc<Self>, bytes: u64, what: &str) -> Result<Permit> {
         if bytes > self.total {
             return Err(Error::Usage(format!(
-                "{what} needs {} but the memory budget (--mem) is {}; raise --mem",
+                "{what} needs {} but the memory budget ({mem}) is {}; raise {mem}",
                 human_bytes(bytes),
-                human_bytes(self.total)
+                human_bytes(self.total),
+                mem = Setting::Mem
             )));
         }
         let mut g = self.lock();
@@ -149,10 +150,11 @@ impl Budget {
             return self.acquire(bytes, what);
         }
         Err(Error::Usage(format!(
-            "{what} needs {} but only {} of the memory budget (--mem {}) is free at that point; raise --mem",
+            "{what} needs {} but only {} of the memory budget ({mem} {}) is free at that point; raise {mem}",
             human_bytes(bytes),
             human_bytes(self.total.saturating_sub(self.used())),
-            human_bytes(self.total)
+            human_bytes(self.total),
+            mem = Setting::Mem
         )))
     }
 
@@ -222,6 +224,6 @@ mod tests {
     fn too_big_is_an_error() {
         let b = Budget::new(100);
         let e = b.acquire(101, "the count grid").unwrap_err().to_string();
-        assert!(e.contains("the count grid") && e.contains("--mem"), "{e}");
+        assert!(e.contains("the count grid") && e.contains("`mem`"), "{e}");
     }
 }

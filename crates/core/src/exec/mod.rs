@@ -9,7 +9,7 @@ pub mod budget;
 pub mod cache;
 pub mod progress;
 
-use crate::error::{Error, Result};
+use crate::error::{Error, Result, Setting};
 
 /// Build the worker pool: exactly `threads` workers (0 means one per available core).
 pub fn pool(threads: usize) -> Result<rayon::ThreadPool> {
@@ -107,14 +107,16 @@ pub fn parse_mem(s: &str) -> Result<u64> {
     let t = s.trim();
     let bad = || {
         Error::Usage(format!(
-            "--mem \"{s}\": expected a size such as 512M, 4G, 1.5GiB, a byte count, or a percentage such as 50%"
+            "{} \"{s}\": expected a size such as 512M, 4G, 1.5GiB, a byte count, or a percentage such as 50%",
+            Setting::Mem
         ))
     };
     if let Some(p) = t.strip_suffix('%') {
         let v: f64 = p.trim().parse().map_err(|_| bad())?;
         if !(v > 0.0 && v <= 100.0) {
             return Err(Error::Usage(format!(
-                "--mem \"{s}\": a percentage must be in (0, 100]"
+                "{} \"{s}\": a percentage must be in (0, 100]",
+                Setting::Mem
             )));
         }
         return Ok((available_memory_bytes() as f64 * v / 100.0) as u64);

@@ -1,5 +1,7 @@
 //! Local frames of a surface normal.
 
+use super::vec::{cross, dot};
+
 /// A right-handed orthonormal pair `(t₁, t₂)` with `t₁ × t₂ = n` spanning the plane normal to
 /// the unit `n`, chosen from `n` alone (so the same normal always gives the same frame): `t₁`
 /// is the axis least aligned with `n` crossed with `n`, normalised.
@@ -15,22 +17,6 @@ pub fn plane_basis(n: [f64; 3]) -> ([f64; 3], [f64; 3]) {
     let l = dot(u, u).sqrt();
     let u = [u[0] / l, u[1] / l, u[2] / l];
     (u, cross(n, u))
-}
-
-/// `a × b`.
-#[inline]
-pub fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-
-/// `a · b`.
-#[inline]
-pub fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
 #[cfg(test)]

@@ -13,5 +13,6 @@ pub mod rect;
 pub mod vec;
 
 pub use eigen::least_eigenvector;
-pub use frame::{cross, dot, plane_basis};
+pub use frame::plane_basis;
+pub use vec::{cross, dot};
 pub use rect::{Rect, RectWorkspace, min_area_rect, min_area_rect_with};

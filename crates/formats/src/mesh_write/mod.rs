@@ -81,7 +81,7 @@ use std::io::{BufWriter, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 
 use super::islands::IslandFilter;
-use crate::error::{Error, IoContext, Result};
+use crate::error::{Error, IoContext, Result, Setting};
 use crate::fs::atomic::{AtomicFile, with_suffix};
 
 mod obj;
@@ -135,8 +135,9 @@ impl MeshFormat {
         };
         if ascii && f != MeshFormat::PlyAscii {
             return Err(Error::Usage(format!(
-                "{}: --ascii is for PLY output; {} has one form only",
+                "{}: {} is for PLY output; {} has one form only",
                 path.display(),
+                Setting::Ascii,
                 f.name()
             )));
         }
@@ -159,16 +160,21 @@ impl MeshFormat {
     /// the format has no place for them.
     pub fn carries(self, path: &Path, normals: bool, density: bool) -> Result<()> {
         let refused = match self {
-            MeshFormat::Stl if normals => Some(
-                "--out-normals: STL has no vertex normals (it stores each triangle's, always written)",
-            ),
-            MeshFormat::Stl | MeshFormat::Obj if density => {
-                Some("--density: only PLY has a per-vertex scalar to hold it; write *.ply")
-            }
+            MeshFormat::Stl if normals => Some((
+                Setting::OutNormals,
+                "STL has no vertex normals (it stores each triangle's, always written)",
+            )),
+            MeshFormat::Stl | MeshFormat::Obj if density => Some((
+                Setting::Density,
+                "only PLY has a per-vertex scalar to hold it; write *.ply",
+            )),
             _ => None,
         };
         match refused {
-            Some(why) => Err(Error::Usage(format!("{}: {why}", path.display()))),
+            Some((setting, why)) => Err(Error::Usage(format!(
+                "{}: {setting}: {why}",
+                path.display()
+            ))),
             None => Ok(()),
         }
     }

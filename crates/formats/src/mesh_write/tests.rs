@@ -536,18 +536,18 @@ fn formats_follow_the_extension_and_refuse_what_they_cannot_hold() {
     let e = f("x.off", false).unwrap_err().to_string();
     assert!(e.contains("x.off") && e.contains("*.stl"), "{e}");
     let e = f("x.obj", true).unwrap_err().to_string();
-    assert!(e.contains("--ascii"), "{e}");
+    assert!(e.contains("`ascii`"), "{e}");
     let p = Path::new("m.stl");
     let e = MeshFormat::Stl
         .carries(p, true, false)
         .unwrap_err()
         .to_string();
-    assert!(e.contains("m.stl") && e.contains("--out-normals"), "{e}");
+    assert!(e.contains("m.stl") && e.contains("`out_normals`"), "{e}");
     let e = MeshFormat::Obj
         .carries(p, false, true)
         .unwrap_err()
         .to_string();
-    assert!(e.contains("--density"), "{e}");
+    assert!(e.contains("`density`"), "{e}");
     MeshFormat::Obj.carries(p, true, false).unwrap();
     MeshFormat::PlyAscii.carries(p, true, true).unwrap();
 }

@@ -80,7 +80,7 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
-use crate::error::{Error, Result};
+use crate::error::{Error, Result, Setting};
 use crate::io::ply_write::PointPlyWriter;
 use crate::types::{Aabb, Attributes, PointBatch};
 use sampler::{Sampler, generate_chunk};
@@ -220,34 +220,40 @@ fn validate(params: &SynthParams, out: &Path) -> Result<()> {
         )));
     }
     if params.points == 0 {
-        return Err(Error::Usage(
-            "--points is 0, expected at least 1 point".to_string(),
-        ));
+        return Err(Error::Usage(format!(
+            "{} is 0, expected at least 1 point",
+            Setting::Points
+        )));
     }
     if let Some([a, k]) = params.relief {
         if params.shape != Shape::Bumpy {
             return Err(Error::Usage(format!(
-                "--amplitude and --frequency shape the relief of bumpy, not of {}",
+                "{} and {} shape the relief of bumpy, not of {}",
+                Setting::Amplitude,
+                Setting::Frequency,
                 params.shape.name()
             )));
         }
         if !(a.is_finite() && (0.0..=MAX_AMPLITUDE).contains(&a)) {
             return Err(Error::Usage(format!(
-                "--amplitude is {a}, expected a number from 0 to {MAX_AMPLITUDE} (relative to \
-                 the radius)"
+                "{} is {a}, expected a number from 0 to {MAX_AMPLITUDE} (relative to \
+                 the radius)",
+                Setting::Amplitude
             )));
         }
         if !(k.is_finite() && k > 0.0 && k <= MAX_FREQUENCY) {
             return Err(Error::Usage(format!(
-                "--frequency is {k}, expected a number above 0 and at most {MAX_FREQUENCY} \
-                 (a wavelength of 2π/K on the unit sphere)"
+                "{} is {k}, expected a number above 0 and at most {MAX_FREQUENCY} \
+                 (a wavelength of 2π/K on the unit sphere)",
+                Setting::Frequency
             )));
         }
     }
     if !(params.noise.is_finite() && params.noise >= 0.0) {
         return Err(Error::Usage(format!(
-            "--noise is {}, expected a finite number >= 0 (a fraction of the bounding-box \
+            "{} is {}, expected a finite number >= 0 (a fraction of the bounding-box \
              diagonal)",
+            Setting::Noise,
             params.noise
         )));
     }
@@ -715,10 +721,10 @@ mod tests {
         // Only bumpy has a relief, and only a sane one.
         for (shape, relief, what) in [
             (Shape::Sphere, [0.01, 8.0], "not of sphere"),
-            (Shape::Bumpy, [0.6, 8.0], "--amplitude is 0.6"),
-            (Shape::Bumpy, [f64::NAN, 8.0], "--amplitude is NaN"),
-            (Shape::Bumpy, [0.01, 0.0], "--frequency is 0"),
-            (Shape::Bumpy, [0.01, 2000.0], "--frequency is 2000"),
+            (Shape::Bumpy, [0.6, 8.0], "`amplitude` is 0.6"),
+            (Shape::Bumpy, [f64::NAN, 8.0], "`amplitude` is NaN"),
+            (Shape::Bumpy, [0.01, 0.0], "`frequency` is 0"),
+            (Shape::Bumpy, [0.01, 2000.0], "`frequency` is 2000"),
         ] {
             let p = SynthParams {
                 relief: Some(relief),

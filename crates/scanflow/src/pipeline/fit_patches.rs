@@ -51,7 +51,7 @@ use kiddo::immutable::float::kdtree::ImmutableKdTree;
 use rayon::prelude::*;
 
 use super::fit::{self, FitJob, FitStats, KNN, Surface, fit_one};
-use crate::error::{Error, Result};
+use crate::error::{Error, Result, Setting};
 use crate::exec::Ctx;
 use crate::spectral::layout::{LayoutParams, layout};
 use crate::spline::graph::knn;
@@ -108,7 +108,10 @@ fn read_store(store: &Store) -> Result<Oriented> {
         if b.normal.len() != b.pos.len() {
             return Err(Error::input(
                 &store.dir,
-                "the store has no normals, which the patch layout groups points by: ingest with --normals auto or estimate",
+                format!(
+                    "the store has no normals, which the patch layout groups points by: ingest with {} auto or estimate",
+                    Setting::Normals
+                ),
             ));
         }
         pos.extend_from_slice(&b.pos);
@@ -241,8 +244,9 @@ fn fit_all(
                 // This thread holds the run's other permits, so nothing frees while it waits:
                 // the patch fits in what is left now, or the run stops saying so.
                 let what = format!(
-                    "the fit of patch {end} ({} points; --patch-points bounds a patch)",
-                    ext[end].len()
+                    "the fit of patch {end} ({} points; {} bounds a patch)",
+                    ext[end].len(),
+                    Setting::PatchPoints
                 );
                 Some(ctx.budget.acquire_now(bytes, &what)?)
             } else {

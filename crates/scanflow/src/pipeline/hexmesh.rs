@@ -34,7 +34,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use crate::error::{Error, Result};
+use crate::error::{Error, Result, Setting};
 use crate::exec::Ctx;
 use crate::hex::extract::{ExtractReport, extract};
 use crate::hex::frames::{self, Singularities};
@@ -201,10 +201,11 @@ fn read_tets(
             Error::input(
                 path,
                 format!(
-                    "the tetrahedra stuffed into the surface at --tet-size {} are not a valid \
+                    "the tetrahedra stuffed into the surface at {tet} {} are not a valid \
                      mesh{at}: {e}; the solid is thinner there, or two of its parts are closer, \
-                     than the stuffing lattice resolves: try a smaller --tet-size",
-                    size
+                     than the stuffing lattice resolves: try a smaller {tet}",
+                    size,
+                    tet = Setting::TetSize
                 ),
             )
         }
@@ -309,8 +310,9 @@ fn run(job: &HexJob, ctx: &Ctx, failure: &mut HexFailure) -> Result<HexStats> {
         return Err(Error::input(
             path,
             format!(
-                "the frame field has {} configuration(s) no hexahedral mesh has; the first: {first}; try --frames polycube, constant or a meta-mesh (--frames meta:FILE)",
-                sing.invalid.len()
+                "the frame field has {} configuration(s) no hexahedral mesh has; the first: {first}; try {frames} polycube, constant or a meta-mesh ({frames} meta:FILE)",
+                sing.invalid.len(),
+                frames = Setting::Frames
             ),
         ));
     }
@@ -599,7 +601,8 @@ fn mesh_at(
     if hexes.hexes.is_empty() {
         return Err(Failed {
             reason: format!(
-                "no hexahedron fits inside at --scale {scale}: choose a smaller --scale"
+                "no hexahedron fits inside at {s} {scale}: choose a smaller {s}",
+                s = Setting::Scale
             ),
             retry: true,
             unfit: false,
@@ -676,8 +679,11 @@ fn flip_failure(param: &ParamReport, scale: f64, tets: usize) -> Failed {
     };
     Failed {
         reason: format!(
-            "the parameterisation flips {} of {} tetrahedra, so no valid hexahedra can be extracted{cause}; try a larger --scale or other --frames",
-            param.flipped_final, tets
+            "the parameterisation flips {} of {} tetrahedra, so no valid hexahedra can be extracted{cause}; try a larger {} or other {}",
+            param.flipped_final,
+            tets,
+            Setting::Scale,
+            Setting::Frames
         ),
         // Flips before any rounding are the field's, at every edge.
         retry: param.flipped_continuous == 0,
@@ -706,10 +712,11 @@ fn inverted_failure(quality: &MeshQuality, relaxed: Option<&RelaxReport>) -> Fai
         });
     Failed {
         reason: format!(
-            "{} of {} hexahedra are inverted (scaled Jacobian ≤ 0), worst: {}{folded}; nothing written (--keep-inverted writes them anyway)",
+            "{} of {} hexahedra are inverted (scaled Jacobian ≤ 0), worst: {}{folded}; nothing written ({} writes them anyway)",
             quality.inverted,
             quality.hexes,
-            worst.join(", ")
+            worst.join(", "),
+            Setting::KeepInverted
         ),
         retry: true,
         unfit: false,

@@ -7,7 +7,7 @@
 use std::path::Path;
 
 use super::workdir::{StoreSource, WORK_STORE};
-use crate::error::{Error, IoContext, Result};
+use crate::error::{Error, IoContext, Result, Setting};
 use crate::exec::Ctx;
 use crate::io::InputSpec;
 use crate::normals::{self, NormalParams};
@@ -104,7 +104,11 @@ pub fn open_or_ingest(
                     if !resume {
                         return Err(Error::input(
                             work_dir,
-                            "work directory holds another run's files; pass --resume to continue that run, or choose another --work-dir",
+                            format!(
+                                "work directory holds another run's files; pass {} to continue that run, or choose another {}",
+                                Setting::Resume,
+                                Setting::WorkDir
+                            ),
                         ));
                     }
                     // A store without its manifest is what a run killed while removing its

@@ -36,7 +36,7 @@ use serde::{Deserialize, Serialize};
 use super::ingest::{IngestParams, IngestStats};
 use super::shard::{Claims, Shard};
 use super::workdir::{self, INGEST_DIR, RunIdentity, StoreSource};
-use crate::error::{Error, IoContext, Result};
+use crate::error::{Error, IoContext, Result, Setting};
 use crate::exec::Ctx;
 use crate::fs::atomic::{self, Durability};
 use crate::io::InputSpec;
@@ -142,9 +142,9 @@ pub fn ingest_split(
     prep.limit_buffers(SPLIT_BUFFER_BYTES);
     let options = [
         ("command", "ingest".to_string()),
-        ("--max-cell-points", sp.max_cell_points.to_string()),
-        ("--skip-invalid", sp.skip_invalid.to_string()),
-        ("--zstd-level", sp.zstd_level.to_string()),
+        (Setting::MaxCellPoints.name(), sp.max_cell_points.to_string()),
+        (Setting::SkipInvalid.name(), sp.skip_invalid.to_string()),
+        (Setting::ZstdLevel.name(), sp.zstd_level.to_string()),
         // The counting grid and the cell buffers follow the budget (and the cells' frames
         // follow the buffers): every task must size them alike. Under the defaults both
         // are at their caps from a --mem of 256 MiB up, so tasks on nodes whose free
@@ -220,7 +220,10 @@ fn complete(out: &Path, inputs: &[InputSpec], params: &IngestParams) -> Result<b
         .ok_or_else(|| {
             Error::input(
                 out,
-                "output store already exists and is not a complete store; remove it or choose another -o",
+                format!(
+                    "output store already exists and is not a complete store; remove it or choose another {}",
+                    Setting::Output
+                ),
             )
         })?;
     let same = m.inputs.len() == inputs.len()
@@ -231,45 +234,56 @@ fn complete(out: &Path, inputs: &[InputSpec], params: &IngestParams) -> Result<b
     if !same {
         return Err(Error::input(
             out,
-            "output store already exists and was made from other inputs; remove it or choose another -o",
+            format!(
+                "output store already exists and was made from other inputs; remove it or choose another {}",
+                Setting::Output
+            ),
         ));
     }
     let mut differ = Vec::new();
     let sp = params.store_params();
     if let Some(level) = m.zstd_level.filter(|&l| l != sp.zstd_level) {
         differ.push(format!(
-            "--zstd-level {level} there, {} here",
+            "{} {level} there, {} here",
+            Setting::ZstdLevel,
             sp.zstd_level
         ));
     }
     if let Some(skip) = m.skip_invalid.filter(|&s| s != sp.skip_invalid) {
         let said = |on: bool| if on { "given" } else { "not given" };
         differ.push(format!(
-            "--skip-invalid {} there, {} here",
+            "{} {} there, {} here",
+            Setting::SkipInvalid,
             said(skip),
             said(sp.skip_invalid)
         ));
     }
     if m.max_cell_points != params.max_cell_points {
         differ.push(format!(
-            "--max-cell-points {} there, {} here",
-            m.max_cell_points, params.max_cell_points
+            "{} {} there, {} here",
+            Setting::MaxCellPoints,
+            m.max_cell_points,
+            params.max_cell_points
         ));
     }
     match (&m.estimated_normals, params.normals) {
         (Some(_), NormalsMode::Use) => {
-            differ.push("--normals: estimated there, the inputs' here".to_string())
+            differ.push(format!("{}: estimated there, the inputs' here", Setting::Normals))
         }
         (None, NormalsMode::Estimate) => {
-            differ.push("--normals: the inputs' there, estimated here".to_string())
+            differ.push(format!("{}: the inputs' there, estimated here", Setting::Normals))
         }
         (Some(e), _) if e.k != params.normal_params.k => differ.push(format!(
-            "--neighbours {} there, {} here",
-            e.k, params.normal_params.k
+            "{} {} there, {} here",
+            Setting::Neighbours,
+            e.k,
+            params.normal_params.k
         )),
         (Some(e), _) if e.robust != params.normal_params.robust => differ.push(format!(
-            "--robust-normals {} there, {} here",
-            e.robust, params.normal_params.robust
+            "{} {} there, {} here",
+            Setting::RobustNormals,
+            e.robust,
+            params.normal_params.robust
         )),
         _ => {}
     }
@@ -277,7 +291,7 @@ fn complete(out: &Path, inputs: &[InputSpec], params: &IngestParams) -> Result<b
         return Err(Error::input(
             out,
             format!(
-                "output store already exists and was made with other options ({}); remove it or choose another -o",
+                "output store already exists and was made with other options ({}); remove it or choose another {}",
                 differ.join("; ")
             ),
         ));

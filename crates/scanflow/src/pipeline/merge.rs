@@ -15,7 +15,7 @@ use serde::{Deserialize, Serialize};
 
 use super::tiles::{MeshSink, VertexAttrs};
 use super::workdir::{self, MERGE_FILE};
-use crate::error::{Error, Result};
+use crate::error::{Error, Result, Setting};
 use crate::exec::Ctx;
 use crate::fs::atomic::{self, Durability};
 use crate::io::mesh_write::MeshTarget;
@@ -59,7 +59,10 @@ pub fn describe(dir: &Path, d: &MergeDescription) -> Result<()> {
         if old != *d {
             return Err(Error::input(
                 &path,
-                "another shard of this work directory found other tiles or another iso-value: were the shards given the same store, options and --mem?",
+                format!(
+                    "another shard of this work directory found other tiles or another iso-value: were the shards given the same store, options and {}?",
+                    Setting::Mem
+                ),
             ));
         }
         return Ok(());
@@ -105,8 +108,9 @@ pub fn merge(work: &Path, out: &MeshTarget, ctx: &Ctx) -> Result<MergeStats> {
         return Err(Error::input(
             work,
             format!(
-                "not a scanflow work directory (it has no {} marker): give the --work-dir of the run whose shards ran",
-                workdir::MARKER
+                "not a scanflow work directory (it has no {} marker): give the {} of the run whose shards ran",
+                workdir::MARKER,
+                Setting::WorkDir
             ),
         ));
     }
@@ -114,7 +118,10 @@ pub fn merge(work: &Path, out: &MeshTarget, ctx: &Ctx) -> Result<MergeStats> {
     let d = read_description(&path)?.ok_or_else(|| {
         Error::input(
             work,
-            "no shard of a split run (reconstruct --shard) has reached its tiles in this work directory: run merge after the shards",
+            format!(
+                "no shard of a split run (reconstruct {}) has reached its tiles in this work directory: run merge after the shards",
+                Setting::Shard
+            ),
         )
     })?;
     // The shards measured densities for --density: only PLY holds them.

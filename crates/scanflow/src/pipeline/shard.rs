@@ -41,7 +41,7 @@ use std::io::Write;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 
-use crate::error::{Error, IoContext, Result};
+use crate::error::{Error, IoContext, Result, Setting};
 
 /// One slice of a run: shard `index` of `count`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -88,7 +88,7 @@ impl Shard {
     /// `AWS_BATCH_JOB_ARRAY_INDEX`, the count given: Kubernetes and AWS Batch do not put it
     /// in the environment). `env` reads a variable.
     pub fn parse(text: &str, env: impl Fn(&str) -> Option<String>) -> Result<Shard> {
-        let bad = |why: String| Error::Usage(format!("--shard {text}: {why}"));
+        let bad = |why: String| Error::Usage(format!("{} {text}: {why}", Setting::Shard));
         let num = |name: &str, v: &str| -> Result<u32> {
             v.trim()
                 .parse::<u32>()
@@ -278,7 +278,7 @@ mod tests {
         assert_eq!(Shard::parse("2/5", &none).unwrap(), Shard::new(2, 5));
         for bad in ["5/5", "1/0", "x/2", "3", "auto", "auto/2", "-1/3"] {
             let e = Shard::parse(bad, &none).unwrap_err().to_string();
-            assert!(e.contains(&format!("--shard {bad}")), "{e}");
+            assert!(e.contains(&format!("`shard` {bad}")), "{e}");
         }
         let slurm = env(&[
             ("SLURM_ARRAY_TASK_ID", "4"),

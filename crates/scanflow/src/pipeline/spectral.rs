@@ -16,7 +16,7 @@ use std::time::Instant;
 use rayon::prelude::*;
 
 use super::workdir::{PATCHES as PATCHES_DIR, RESAMPLED};
-use crate::error::{Error, IoContext, Result};
+use crate::error::{Error, IoContext, Result, Setting};
 use crate::exec::Ctx;
 use crate::exec::budget::Share;
 use crate::exec::cache::Lru;
@@ -235,7 +235,10 @@ pub(super) fn check_store(store: &Store) -> Result<()> {
     if !store.layout.attrs.normal {
         return Err(Error::input(
             &store.dir,
-            "the points have no normals, which patches are laid out by: ingest with --normals auto or estimate",
+            format!(
+                "the points have no normals, which patches are laid out by: ingest with {} auto or estimate",
+                Setting::Normals
+            ),
         ));
     }
     if store.manifest.point_count == 0 {

@@ -32,7 +32,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use super::reconstruct::RunParams;
-use crate::error::{Error, IoContext, Result};
+use crate::error::{Error, IoContext, Result, Setting};
 use crate::fs::atomic::{self, Durability};
 use crate::io::InputSpec;
 use crate::normals::{NormalParams, NormalsMode};
@@ -100,7 +100,7 @@ pub fn resolve(requested: &Path, output: &Path) -> Result<PathBuf> {
         Err(_) => Ok(requested.to_path_buf()),
         Ok(m) if !m.is_dir() => Err(Error::input(
             requested,
-            "--work-dir exists and is not a directory",
+            format!("{} exists and is not a directory", Setting::WorkDir),
         )),
         Ok(_) if requested.join(MARKER).exists() => Ok(requested.to_path_buf()),
         Ok(_) => {
@@ -139,13 +139,13 @@ impl RunIdentity {
         source: &StoreSource,
         normals: NormalsMode,
         normal_params: &NormalParams,
-        options: &[(&str, String)],
+        options: &[(impl AsRef<str>, String)],
     ) -> Result<RunIdentity> {
         let mut e = BTreeMap::new();
         let mut put = |k: &str, v: String| e.insert(k.to_string(), v);
         put("scanflow", env!("CARGO_PKG_VERSION").to_string());
         for (k, v) in options {
-            put(k, v.clone());
+            put(k.as_ref(), v.clone());
         }
         match source {
             StoreSource::Store(dir) => {
@@ -157,10 +157,13 @@ impl RunIdentity {
                 );
             }
             StoreSource::Points(specs) => {
-                put("--normals", format!("{normals:?}"));
-                put("--neighbours", normal_params.k.to_string());
-                put("--robust-normals", normal_params.robust.to_string());
-                put("--fixed-neighbours", (!normal_params.adaptive).to_string());
+                put(Setting::Normals.name(), format!("{normals:?}"));
+                put(Setting::Neighbours.name(), normal_params.k.to_string());
+                put(Setting::RobustNormals.name(), normal_params.robust.to_string());
+                put(
+                    Setting::FixedNeighbours.name(),
+                    (!normal_params.adaptive).to_string(),
+                );
                 for (i, s) in specs.iter().enumerate() {
                     let n = i + 1;
                     put(&format!("input {n}"), canonical(&s.path)?);
@@ -190,7 +193,9 @@ impl RunIdentity {
                     self.entries.get(k).unwrap_or(&none),
                     now.entries.get(k).unwrap_or(&none),
                 );
-                (a != b).then(|| format!("{k}: {a} then, {b} now"))
+                // A setting's key is its name; the message shows it as the front end does.
+                let shown = Setting::from_name(k).map_or_else(|| k.to_string(), |s| s.to_string());
+                (a != b).then(|| format!("{shown}: {a} then, {b} now"))
             })
             .take(DIFFS_SHOWN)
             .collect()
@@ -263,7 +268,11 @@ pub fn claim(dir: &Path, identity: &RunIdentity, resume: bool) -> Result<Lease> 
             Some(_) if !resume => {
                 return Err(Error::input(
                     dir,
-                    "work directory holds another run's files; pass --resume to continue that run, or choose another --work-dir",
+                    format!(
+                        "work directory holds another run's files; pass {} to continue that run, or choose another {}",
+                        Setting::Resume,
+                        Setting::WorkDir
+                    ),
                 ));
             }
             Some(old) if old != *identity => {
@@ -345,8 +354,9 @@ pub fn join(dir: &Path, identity: &RunIdentity) -> Result<Lease> {
         return Err(Error::input(
             dir,
             format!(
-                "this shard's run differs from the one the work directory was made for ({}): give every shard the same inputs and options, or another --work-dir",
-                old.differences(identity).join("; ")
+                "this shard's run differs from the one the work directory was made for ({}): give every shard the same inputs and options, or another {}",
+                old.differences(identity).join("; "),
+                Setting::WorkDir
             ),
         ));
     }
@@ -458,13 +468,18 @@ pub fn prepare(store: &Store, levels: &[Plan], params: &RunParams) -> Result<Wor
             // Another shard's checkpoints: never removed.
             return Err(Error::input(
                 &info_path,
-                "another shard of this work directory planned other grids or read another store: give every shard the same store, options and --mem (the grids follow the memory budget)",
+                format!(
+                    "another shard of this work directory planned other grids or read another store: give every shard the same store, options and {} (the grids follow the memory budget)",
+                    Setting::Mem
+                ),
             ));
         }
         if old.is_some() {
             log::info!(
-                "{}: the checkpoints there were made with another plan (--mem and --tile change it): solving the leaves again",
-                dir.display()
+                "{}: the checkpoints there were made with another plan ({} and {} change it): solving the leaves again",
+                dir.display(),
+                Setting::Mem,
+                Setting::Tile
             );
             for name in [LEAVES, TILES, CLAIMS] {
                 let p = dir.join(name);

@@ -220,7 +220,7 @@ fn closed_component_is_fixed_by_projection() {
     let e = parameterise(&pts, &g, Method::chord())
         .unwrap_err()
         .to_string();
-    assert!(e.contains("no boundary") && e.contains("--patches"), "{e}");
+    assert!(e.contains("no boundary") && e.contains("`patches`"), "{e}");
 }
 
 #[test]

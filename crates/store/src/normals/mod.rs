@@ -46,7 +46,7 @@ use std::time::Instant;
 use rayon::prelude::*;
 
 use crate::Staged;
-use crate::error::{Error, IoContext, Result};
+use crate::error::{Error, IoContext, Result, Setting};
 use crate::exec::Ctx;
 use crate::exec::budget::Share;
 use crate::exec::cache::Lru;
@@ -402,7 +402,8 @@ pub fn fit_cells(
 fn check_k(params: &NormalParams) -> Result<()> {
     if params.k < 3 {
         return Err(Error::Usage(format!(
-            "--neighbours {}: a plane fit needs at least 3",
+            "{} {}: a plane fit needs at least 3",
+            Setting::Neighbours,
             params.k
         )));
     }

@@ -607,10 +607,12 @@ pub enum ParseError {
 }
 
 impl Cli {
-    /// Parse `args` (the program name first).
+    /// Parse `args` (the program name first). From here on the library's messages name
+    /// settings by their flags ([`flags::install`](crate::cli::flags::install)).
     pub fn parse_from_args(
         args: impl IntoIterator<Item = impl Into<OsString> + Clone>,
     ) -> Result<Cli, ParseError> {
+        crate::cli::flags::install();
         Cli::try_parse_from(args).map_err(|e| match choice_message(&e) {
             Some(msg) => ParseError::Choice(msg),
             None => ParseError::Clap(e),

@@ -74,7 +74,7 @@ pub(crate) fn select(mode: GpuMode) -> (Option<wgpu::Adapter>, String) {
 
 /// The error of `OPTION on` (`--gpu`, `--gpu-solve`) when wgpu finds no adapter it can use;
 /// `found` lists the adapters it found ([`select`]).
-pub(crate) fn none_found(option: &str, found: &str) -> crate::error::Error {
+pub(crate) fn none_found(option: crate::error::Setting, found: &str) -> crate::error::Error {
     crate::error::Error::Usage(format!(
         "{option} on: wgpu found no GPU adapter with compute shaders (adapters: {found}); \
          install a Vulkan driver (Mesa's lavapipe is in mesa-vulkan-drivers) or use \

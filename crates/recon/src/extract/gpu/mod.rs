@@ -104,7 +104,7 @@ use self::buffers::Buffers;
 use self::leaf_pool::{LeafPool, TileWords};
 use self::passes::{BlockJob, BlockOutcome, Pipelines};
 use self::plan::SubBlock;
-use crate::error::{Error, Result};
+use crate::error::{Error, Result, Setting};
 use crate::extract::cpu::McWorkspace;
 use crate::extract::field::BlendEval;
 use crate::types::{Blend, GridGeom, TileMesh};
@@ -132,7 +132,8 @@ impl FromStr for GpuMode {
             "on" => Ok(GpuMode::On),
             "off" => Ok(GpuMode::Off),
             _ => Err(Error::Usage(format!(
-                "--gpu {s:?}: expected one of auto, on, off"
+                "{} {s:?}: expected one of auto, on, off",
+                Setting::Gpu
             ))),
         }
     }
@@ -258,7 +259,7 @@ impl GpuExtractor {
         let (best, found) = adapter::select(mode);
         let Some(adapter) = best else {
             if mode == GpuMode::On {
-                return Err(adapter::none_found("--gpu", &found));
+                return Err(adapter::none_found(Setting::Gpu, &found));
             }
             log::info!(
                 "marching cubes on the CPU: no discrete or integrated GPU (adapters: {found})"
@@ -274,7 +275,9 @@ impl GpuExtractor {
                 );
                 Ok(Some(g))
             }
-            Err(e) if mode == GpuMode::On => Err(Error::Usage(format!("--gpu on: {e}"))),
+            Err(e) if mode == GpuMode::On => {
+                Err(Error::Usage(format!("{} on: {e}", Setting::Gpu)))
+            }
             Err(e) => {
                 log::warn!("marching cubes on the CPU: {e}");
                 Ok(None)

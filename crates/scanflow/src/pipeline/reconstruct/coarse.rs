@@ -221,7 +221,7 @@ pub(super) fn density_pass(
 /// the moments that refuse planar and linear inputs; solve. Each store cell's share
 /// ([`CellSplat`]: its splat and screening aggregates apart from the grids, and the rest) is
 /// computed on its own, in parallel; the shares are added in cell order, the grids' in
-/// parallel over z-slabs ([`fft_solve::add_boxes`], [`ScreenBuilder::add_parts`]), so the
+/// parallel over z-slabs ([`grid::add_boxes`], [`ScreenBuilder::add_parts`]), so the
 /// bits are the same for any thread and shard count ([`over_cells`]).
 pub(super) fn coarse_pass(
     store: &Store,
@@ -256,7 +256,7 @@ pub(super) fn coarse_pass(
     let noise_every = screen::noise_cell_stride(m.point_count);
     let nodes = cgrid.n as u64;
     let cell_bytes = |i: usize| {
-        let box_bytes = fft_solve::SplatBox::bytes_within(cell_nodes(store, i, nodes));
+        let box_bytes = grid::SplatBox::bytes_within(cell_nodes(store, i, nodes));
         let screen_bytes = if screened {
             SCREEN_PART_ENTRY_BYTES * m.cells[i].count.min(box_bytes / 12)
         } else {
@@ -295,7 +295,7 @@ pub(super) fn coarse_pass(
         leaves.dedup();
         stage.inc(b.len() as u64);
         Ok(CellSplat {
-            splat: fft_solve::splat_box(&cgrid, &b.pos, &b.normal),
+            splat: grid::splat_box(&cgrid, &b.pos, &b.normal),
             screen: if screened {
                 ScreenBuilder::part(&cgrid, &b.pos)
             } else {
@@ -322,9 +322,9 @@ pub(super) fn coarse_pass(
             r.marks.iter().for_each(|&i| support.mark_index(i as usize));
             occupied.extend(&r.leaves);
         }
-        let boxes: Vec<&fft_solve::SplatBox> = parts.iter().map(|r| &r.splat).collect();
+        let boxes: Vec<&grid::SplatBox> = parts.iter().map(|r| &r.splat).collect();
         ctx.pool
-            .install(|| fft_solve::add_boxes(&cgrid, &boxes, &mut v));
+            .install(|| grid::add_boxes(&cgrid, &boxes, &mut v));
         if screened {
             let aggregates: Vec<&[_]> = parts.iter().map(|r| &r.screen[..]).collect();
             ctx.pool.install(|| screen.add_parts(&aggregates));

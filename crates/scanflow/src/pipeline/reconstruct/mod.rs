@@ -17,7 +17,7 @@ use super::points::PointSource;
 use super::shard::{Claims, Shard};
 use super::tiles::{self, TileJob};
 use super::workdir::{self, RunIdentity, StoreSource, WorkDir};
-use crate::error::{Error, Result};
+use crate::error::{Error, Result, Setting};
 use crate::exec::Ctx;
 use crate::exec::budget::{Permit, Share};
 use crate::exec::progress::Stage;
@@ -33,7 +33,7 @@ use crate::recon::pou::unit_for;
 use crate::recon::screen::SPARSE_SPACINGS;
 use crate::recon::{
     CoarseField, DEFAULT_ERROR, DEFAULT_MIN_POINTS, LeafDetail, LeafPoints, LeafRule, LeafSolvers,
-    Level, Moments, Plan, PlanBudget, PointWeight, fft_solve, refine_leaf,
+    Level, Moments, Plan, PlanBudget, PointWeight, grid, refine_leaf,
     screen::{
         self, NOISE_KEY_BYTES, NoiseStats, SCREEN_PART_ENTRY_BYTES, ScreenBuilder, Smoothing,
     },
@@ -183,7 +183,7 @@ impl ReconParams {
         let params = self;
         let options = [
             ("command", "reconstruct".to_string()),
-            ("--depth", params.solve.depth.to_string()),
+            (Setting::Depth.name(), params.solve.depth.to_string()),
             // The measured width's and weight's rules are part of it: a run before the sparse
             // floor (`recon::screen::sparse_floor_voxels`) solved sparse samples otherwise,
             // and one before the noise of close pairs (`NoiseStats::pair_sigma_voxels`)
@@ -191,7 +191,7 @@ impl ReconParams {
             // (`PairStats::nugget`) did folded relief (their coarse checkpoints are of older
             // formats too).
             (
-                "--smooth",
+                Setting::Smooth.name(),
                 match params.solve.smoothing {
                     Smoothing::Measured => format!(
                         "measured, narrowed by the noise's share of the quadrics' residual, \
@@ -201,7 +201,7 @@ impl ReconParams {
                 },
             ),
             (
-                "--point-weight",
+                Setting::PointWeight.name(),
                 format!(
                     "{}, noise from close pairs cut at {} spreads, the relief's share from {} \
                      voxel of noise to {}",
@@ -211,11 +211,11 @@ impl ReconParams {
                     crate::recon::screen::NOISE_DOMINANT_VOXELS
                 ),
             ),
-            ("--error", params.solve.error.to_string()),
-            ("--min-points", params.solve.min_points.to_string()),
-            ("--trim", params.mesh.trim.to_string()),
+            (Setting::Error.name(), params.solve.error.to_string()),
+            (Setting::MinPoints.name(), params.solve.min_points.to_string()),
+            (Setting::Trim.name(), params.mesh.trim.to_string()),
             (
-                "--no-fit",
+                Setting::NoFit.name(),
                 match params.mesh.fit {
                     true => format!(
                         "false, none from {} voxel of noise, noisy samples' misfit by half",
@@ -225,20 +225,20 @@ impl ReconParams {
                 },
             ),
             (
-                "--gpu-solve",
+                Setting::GpuSolve.name(),
                 crate::recon::gpu_solve::device_identity(params.run.gpu_solve)?,
             ),
-            ("--density", params.mesh.density.to_string()),
-            ("--confidence", params.solve.confidence.to_string()),
+            (Setting::Density.name(), params.mesh.density.to_string()),
+            (Setting::Confidence.name(), params.solve.confidence.to_string()),
             (
-                "--samples-per-node",
+                Setting::SamplesPerNode.name(),
                 params
                     .solve
                     .samples_per_node
                     .map_or_else(|| "none".to_string(), |s| s.to_string()),
             ),
             (
-                "--trim-density",
+                Setting::TrimDensity.name(),
                 params
                     .mesh
                     .trim_density
@@ -630,7 +630,10 @@ fn plan_run(store: &Store, params: &ReconParams, ctx: &Ctx) -> Result<Vec<Plan>>
     if !m.attributes.normal {
         return Err(Error::input(
             &store.dir,
-            "the store's points have no normals (nx ny nz), which reconstruction requires: ingest it again with --normals auto or estimate, or reconstruct from the point files (normals are then estimated)",
+            format!(
+                "the store's points have no normals (nx ny nz), which reconstruction requires: ingest it again with {} auto or estimate, or reconstruct from the point files (normals are then estimated)",
+                Setting::Normals
+            ),
         ));
     }
     if m.point_count < MIN_POINTS {
@@ -645,7 +648,10 @@ fn plan_run(store: &Store, params: &ReconParams, ctx: &Ctx) -> Result<Vec<Plan>>
     if params.solve.confidence && !m.attributes.confidence && m.estimated_normals.is_some() {
         return Err(Error::input(
             &store.dir,
-            "--confidence: the points carry no confidence (a PLY vertex property \"confidence\") and their normals were estimated (unit length), so there is nothing to weigh them by",
+            format!(
+                "{}: the points carry no confidence (a PLY vertex property \"confidence\") and their normals were estimated (unit length), so there is nothing to weigh them by",
+                Setting::Confidence
+            ),
         ));
     }
     let mut levels = crate::recon::plan::levels(

@@ -209,7 +209,7 @@ impl MeshSink {
         let _permit = match self.islands {
             true => Some(ctx.budget.acquire(
                 crate::io::islands::BYTES_PER_VERTEX * writer.vertices(),
-                "the connected pieces of the mesh (--trim-islands)",
+                &format!("the connected pieces of the mesh ({})", Setting::TrimIslands),
             )?),
             false => None,
         };
