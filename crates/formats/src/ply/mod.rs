@@ -30,10 +30,15 @@
 //!
 //! * `header.rs`: the header model ([`PlyHeader`], [`Element`], [`Property`], [`Scalar`],
 //!   [`Encoding`]) and its parser, [`parse_header`];
-//! * `point_reader/`: [`PlyReader`], the `vertex` element as points (`decode.rs` the records).
+//! * `point_reader/`: [`PlyReader`], the `vertex` element as points (`decode.rs` the records);
+//! * `mesh_reader/`: [`read_mesh`] and [`read_scan_mesh`], the vertices through [`PlyReader`]
+//!   and the triangles from the `face` element (`faces.rs`) or a scan's `range_grid`
+//!   (`range_grid.rs`), and [`ply_face_count`] (all re-exported by [`crate::mesh_read`]).
 
 mod header;
+mod mesh_reader;
 mod point_reader;
 
 pub use header::{Element, Encoding, PlyHeader, Property, Scalar, parse_header};
+pub use mesh_reader::{ply_face_count, read_mesh, read_scan_mesh};
 pub use point_reader::PlyReader;
