@@ -54,10 +54,11 @@ pub mod mesh_read;
 pub mod mesh_write;
 pub mod obj;
 pub mod ply;
-pub mod ply_write;
 pub mod preview;
 pub mod stl;
 pub mod xyz;
+
+pub use ply::point_writer as ply_write;
 
 use std::path::{Path, PathBuf};
 

@@ -34,10 +34,16 @@
 //! * `mesh_reader/`: [`read_mesh`] and [`read_scan_mesh`], the vertices through [`PlyReader`]
 //!   and the triangles from the `face` element (`faces.rs`) or a scan's `range_grid`
 //!   (`range_grid.rs`), and [`ply_face_count`] (all re-exported by [`crate::mesh_read`]).
+//! * `point_writer.rs`: [`point_writer::PointPlyWriter`], points as binary little-endian PLY
+//!   (also reached as [`crate::ply_write`]);
+//! * `mesh_encoder.rs`: the binary and ASCII PLY encoders of the streamed mesh writer
+//!   ([`crate::mesh_write`], which stages the mesh and calls them from its `finish`).
 
 mod header;
+pub(crate) mod mesh_encoder;
 mod mesh_reader;
 mod point_reader;
+pub mod point_writer;
 
 pub use header::{Element, Encoding, PlyHeader, Property, Scalar, parse_header};
 pub use mesh_reader::{ply_face_count, read_mesh, read_scan_mesh};

@@ -1,23 +1,21 @@
-//! The PLY encoders: the binary little-endian writer with its fixed-size header (the room for
-//! the largest counts, padded by a comment line), and the ASCII writer with the same header
-//! unpadded. The header's grammar and the record layout are documented in [`super`].
+//! The PLY encoders of the streamed mesh writer ([`crate::mesh_write`], which stages the mesh
+//! and calls them from `finish`): the binary little-endian writer with its fixed-size header
+//! (the room for the largest counts, padded by a comment line), and the ASCII writer with the
+//! same header unpadded. The header's grammar and the record layout are documented in
+//! [`crate::mesh_write`].
 
 use std::fmt::Write as _;
 use std::io::Write;
 
-use super::{MeshWriter, VertexFormat};
 use crate::error::{IoContext, Result};
+use crate::mesh_write::text::num;
+use crate::mesh_write::{MeshWriter, VertexFormat};
 
 /// Bytes of one binary PLY face record: the count byte and 3 indices.
-pub(super) const FACE_BYTES: u64 = 1 + 3 * 4;
+pub(crate) const FACE_BYTES: u64 = 1 + 3 * 4;
 
 /// The header lines before the padding comment, and after it.
-pub(super) fn header_parts(
-    vertices: u64,
-    faces: u64,
-    f: VertexFormat,
-    ascii: bool,
-) -> (String, String) {
+fn header_parts(vertices: u64, faces: u64, f: VertexFormat, ascii: bool) -> (String, String) {
     let head = format!(
         "ply\nformat {} 1.0\ncomment written by scanflow\n",
         if ascii {
@@ -59,7 +57,7 @@ pub(super) fn header_parts(
 }
 
 /// The padding line: `comment`, a space, spaces up to `len` bytes with its newline.
-pub(super) const PAD_MIN: usize = "comment \n".len();
+const PAD_MIN: usize = "comment \n".len();
 
 /// Bytes of the header of every binary PLY of vertex format `f`.
 pub fn header_bytes(f: VertexFormat) -> usize {
@@ -68,7 +66,7 @@ pub fn header_bytes(f: VertexFormat) -> usize {
 }
 
 /// The binary header for the given counts, padded to exactly `header_bytes(f)` bytes.
-pub(super) fn header(vertices: u64, faces: u64, f: VertexFormat) -> String {
+pub(crate) fn header(vertices: u64, faces: u64, f: VertexFormat) -> String {
     let (head, tail) = header_parts(vertices, faces, f, false);
     let pad = header_bytes(f) - head.len() - tail.len();
     let mut h = head;
@@ -79,18 +77,9 @@ pub(super) fn header(vertices: u64, faces: u64, f: VertexFormat) -> String {
     h
 }
 
-/// A float written as text: the shortest form that reads back to the same value.
-pub(super) fn num(s: &mut String, v: f64, double: bool) {
-    if double {
-        let _ = write!(s, "{v:?}");
-    } else {
-        let _ = write!(s, "{:?}", v as f32);
-    }
-}
-
 impl MeshWriter {
-    pub(super) fn write_ply_binary(&mut self, w: &mut impl Write) -> Result<()> {
-        let (vf, tmp) = (self.vf, self.tmp_path.clone());
+    pub(crate) fn write_ply_binary(&mut self, w: &mut impl Write) -> Result<()> {
+        let (vf, tmp) = (self.vertex_format(), self.tmp_path().to_path_buf());
         let (vertices, faces) = self.counts_out();
         w.write_all(header(vertices, faces, vf).as_bytes())
             .with_path(&tmp)?;
@@ -130,8 +119,8 @@ impl MeshWriter {
         })
     }
 
-    pub(super) fn write_ply_ascii(&mut self, w: &mut impl Write) -> Result<()> {
-        let (vf, tmp) = (self.vf, self.tmp_path.clone());
+    pub(crate) fn write_ply_ascii(&mut self, w: &mut impl Write) -> Result<()> {
+        let (vf, tmp) = (self.vertex_format(), self.tmp_path().to_path_buf());
         let (vertices, faces) = self.counts_out();
         let (h, t) = header_parts(vertices, faces, vf, true);
         w.write_all(h.as_bytes()).with_path(&tmp)?;
