@@ -79,7 +79,7 @@ impl Scalar {
     }
 
     /// Whether the type is `float` or `double`.
-    pub(super) fn is_float(self) -> bool {
+    pub fn is_float(self) -> bool {
         matches!(self, Scalar::F32 | Scalar::F64)
     }
 
@@ -120,7 +120,7 @@ pub enum Property {
 
 impl Property {
     /// The property's name.
-    pub(super) fn name(&self) -> &str {
+    pub fn name(&self) -> &str {
         match self {
             Property::Scalar { name, .. } | Property::List { name, .. } => name,
         }
@@ -142,7 +142,7 @@ pub struct Element {
 
 impl Element {
     /// Size of one record when it has no list, in bytes.
-    pub(super) fn fixed_size(&self) -> Option<u64> {
+    pub fn fixed_size(&self) -> Option<u64> {
         let mut s = 0u64;
         for p in &self.props {
             match p {
@@ -176,6 +176,9 @@ pub struct PlyHeader {
     pub data_start: u64,
     /// Number of header lines, `end_header` included.
     pub lines: u64,
+    /// The `obj_info` lines, in order: the header line (1-based) and the words after the
+    /// keyword, joined by single spaces (a range scan's `num_cols 640`, say).
+    pub obj_info: Vec<(u64, String)>,
 }
 
 /// Parse a header from the first bytes of a file. `bytes` may be longer than the header.
@@ -184,6 +187,7 @@ pub fn parse_header(path: &Path, bytes: &[u8]) -> Result<PlyHeader> {
     let mut line_no = 0u64;
     let mut encoding = None;
     let mut elements: Vec<Element> = Vec::new();
+    let mut obj_info = Vec::new();
     loop {
         let Some(nl) = bytes[pos..].iter().position(|&b| b == b'\n') else {
             return Err(Error::format(
@@ -226,7 +230,8 @@ pub fn parse_header(path: &Path, bytes: &[u8]) -> Result<PlyHeader> {
         }
         match toks.first().copied() {
             None => continue,
-            Some("comment") | Some("obj_info") => continue,
+            Some("comment") => continue,
+            Some("obj_info") => obj_info.push((line_no, toks[1..].join(" "))),
             Some("format") => encoding = Some(parse_format(&toks, line, &bad)?),
             Some("element") => elements.push(parse_element(&toks, line, line_no, &bad)?),
             Some("property") => {
@@ -261,6 +266,7 @@ pub fn parse_header(path: &Path, bytes: &[u8]) -> Result<PlyHeader> {
         elements,
         data_start: pos as u64,
         lines: line_no,
+        obj_info,
     })
 }
 

@@ -33,18 +33,14 @@ use std::fs::File;
 use std::io::{BufReader, Read};
 use std::path::Path;
 
+use super::header::HEADER_LIMIT;
 use super::{Encoding, PlyHeader, PlyReader, parse_header};
 use crate::PointReader;
 use crate::error::{Error, IoContext, Location, Result};
 use crate::mesh_read::Mesh;
 use crate::types::PointBatch;
-use faces::{
-    FaceLayout, FaceSink, ListSink, Source, read_ascii_faces, read_binary_faces,
-    skip_binary_element,
-};
+use faces::{FaceLayout, FaceSink, ListSink, Source, read_ascii_faces, read_binary_faces};
 
-/// Bytes read to find the header.
-const HEADER_BYTES: u64 = 1 << 20;
 /// Vertices per chunk when reading them through [`PlyReader`].
 const VERTEX_CHUNK: u64 = 1 << 20;
 /// Buffer of the face reader.
@@ -57,7 +53,7 @@ pub fn ply_face_count(path: &Path) -> Result<Option<u64>> {
     let mut f = File::open(path).with_path(path)?;
     let mut head = Vec::new();
     (&mut f)
-        .take(HEADER_BYTES)
+        .take(HEADER_LIMIT as u64)
         .read_to_end(&mut head)
         .with_path(path)?;
     if !head.starts_with(b"ply") {
@@ -124,7 +120,7 @@ fn read_scan_mesh_from(path: &Path, reader: PlyReader) -> Result<Mesh> {
         (None, None) => None,
     };
     let grid = match (face_at, grid_at) {
-        (None, Some(at)) => Some(range_grid::grid_size(path, &header.elements[at])?),
+        (None, Some(at)) => Some(range_grid::grid_size(path, &header, &header.elements[at])?),
         _ => None,
     };
 
@@ -136,13 +132,14 @@ fn read_scan_mesh_from(path: &Path, reader: PlyReader) -> Result<Mesh> {
         vertices.extend_from_slice(&batch.pos);
     }
     drop(batch);
-    drop(reader);
     let Some((at, layout)) = layout else {
         return Ok(Mesh {
             vertices,
             triangles: Vec::new(),
         });
     };
+    let start = reader.element_start(at);
+    drop(reader);
     let count = header.elements[at].count;
     let triangles = match grid {
         None => {
@@ -151,12 +148,12 @@ fn read_scan_mesh_from(path: &Path, reader: PlyReader) -> Result<Mesh> {
                 triangles: Vec::new(),
                 polygon: Vec::new(),
             };
-            read_lists(path, &header, at, &layout, &mut faces)?;
+            read_lists(path, &header, at, start, &layout, &mut faces)?;
             faces.triangles
         }
         Some(size) => {
             let mut pixels = range_grid::PixelSink::new(n_vertices, count);
-            read_lists(path, &header, at, &layout, &mut pixels)?;
+            read_lists(path, &header, at, start, &layout, &mut pixels)?;
             range_grid::triangulate(size, &pixels.pixels, &vertices)
         }
     };
@@ -166,11 +163,14 @@ fn read_scan_mesh_from(path: &Path, reader: PlyReader) -> Result<Mesh> {
     })
 }
 
-/// Read the index lists of element `at` of `header` into `sink`.
+/// Read the index lists of element `at` of `header` into `sink`. In a binary file its records
+/// start at `start` ([`PlyReader::element_start`]); in an ascii one the lines before them are
+/// counted.
 fn read_lists(
     path: &Path,
     header: &PlyHeader,
     at: usize,
+    start: Option<u64>,
     layout: &FaceLayout,
     sink: &mut impl ListSink,
 ) -> Result<()> {
@@ -183,9 +183,9 @@ fn read_lists(
         pos: 0,
         file_len,
     };
-    src.seek(header.data_start)?;
     match header.encoding {
         Encoding::Ascii => {
+            src.seek(header.data_start)?;
             let skip = header.elements[..at]
                 .iter()
                 .fold(0u64, |s, e| s.saturating_add(e.count));
@@ -209,9 +209,7 @@ fn read_lists(
         }
         Encoding::BinaryLe | Encoding::BinaryBe => {
             let be = header.encoding == Encoding::BinaryBe;
-            for e in &header.elements[..at] {
-                skip_binary_element(&mut src, e, be)?;
-            }
+            src.seek(start.expect("a binary file's element starts are found when it is opened"))?;
             read_binary_faces(&mut src, layout, el.count, be, sink)
         }
     }

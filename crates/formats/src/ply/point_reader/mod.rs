@@ -5,7 +5,8 @@
 //! order and of any scalar type (`char`…`double` and the `int8`…`float64` spellings). Elements
 //! before `vertex` (a `camera`, say) are skipped by size, walking their lists where they have
 //! any; elements after it (faces, `range_grid`, `tristrips`) are walked once at open time in
-//! binary files, so that a truncated file is reported at open, never half-read.
+//! binary files, so that a truncated file is reported at open, never half-read; where each
+//! element's records start is kept ([`PlyReader::element_start`]), for the mesh reader.
 //!
 //! Binary vertex records are decoded straight from a memory-mapped window per chunk. ply-rs
 //! parses whole files into owned maps and gives no byte offsets, so the reader is ours.
@@ -57,6 +58,9 @@ pub struct PlyReader {
     stride: usize,
     /// Byte where vertex data starts.
     vertex_start: u64,
+    /// Binary: the byte where each element's records start, in header order (empty for
+    /// ascii).
+    element_starts: Vec<u64>,
     /// Ascii: line number of the first vertex line, and an index of (byte, line, element)
     /// every [`ASCII_INDEX_STEP`] vertices, ending with the position after the last vertex.
     ascii_index: Vec<(u64, u64, u64)>,
@@ -181,6 +185,7 @@ impl PlyReader {
             layout,
             stride,
             vertex_start: 0,
+            element_starts: Vec::new(),
             ascii_index: Vec::new(),
             attrs,
             header,
@@ -198,6 +203,12 @@ impl PlyReader {
         &self.header
     }
 
+    /// The byte where the records of element `i` (in header order) start, in a binary file
+    /// (found when it was opened); `None` in an ascii one.
+    pub fn element_start(&self, i: usize) -> Option<u64> {
+        self.element_starts.get(i).copied()
+    }
+
     fn big_endian(&self) -> bool {
         self.header.encoding == Encoding::BinaryBe
     }
@@ -205,10 +216,12 @@ impl PlyReader {
     /// Walk every element's extent; fail on the first one the file does not fully hold.
     fn validate_binary(&mut self, file_len: u64) -> Result<()> {
         let mut pos = self.header.data_start;
+        let mut starts = Vec::with_capacity(self.header.elements.len());
         for (i, el) in self.header.elements.iter().enumerate() {
             if i == self.vertex {
                 self.vertex_start = pos;
             }
+            starts.push(pos);
             let end = match el.fixed_size() {
                 Some(sz) => {
                     let end = sz
@@ -235,6 +248,7 @@ impl PlyReader {
             };
             pos = end;
         }
+        self.element_starts = starts;
         Ok(())
     }
 
