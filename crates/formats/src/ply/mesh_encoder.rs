@@ -2,11 +2,14 @@
 //! and calls them from `finish`): the binary little-endian writer with its fixed-size header
 //! (the room for the largest counts, padded by a comment line), and the ASCII writer with the
 //! same header unpadded. The header's grammar and the record layout are documented in
-//! [`crate::mesh_write`].
+//! [`crate::mesh_write`]; the header is written from the model the readers parse into
+//! (`write.rs`), its vertex element starting as the point writer's does.
 
 use std::fmt::Write as _;
 use std::io::Write;
 
+use super::write::{WRITTEN_BY, header_text, put_f32, put_position, vertex_element};
+use super::{Element, Encoding, Property, Scalar};
 use crate::error::{IoContext, Result};
 use crate::mesh_write::text::num;
 use crate::mesh_write::{MeshWriter, VertexFormat};
@@ -14,67 +17,48 @@ use crate::mesh_write::{MeshWriter, VertexFormat};
 /// Bytes of one binary PLY face record: the count byte and 3 indices.
 pub(crate) const FACE_BYTES: u64 = 1 + 3 * 4;
 
-/// The header lines before the padding comment, and after it.
-fn header_parts(vertices: u64, faces: u64, f: VertexFormat, ascii: bool) -> (String, String) {
-    let head = format!(
-        "ply\nformat {} 1.0\ncomment written by scanflow\n",
-        if ascii {
-            "ascii"
-        } else {
-            "binary_little_endian"
-        }
-    );
-    let mut tail = format!("element vertex {vertices}\n");
-    let ty = if f.double { "double" } else { "float" };
-    for n in ["x", "y", "z"] {
-        tail.push_str(&format!("property {ty} {n}\n"));
-    }
-    if f.normals {
-        for n in ["nx", "ny", "nz"] {
-            tail.push_str(&format!("property float {n}\n"));
-        }
-    }
-    if f.color {
-        for n in ["red", "green", "blue"] {
-            tail.push_str(&format!("property uchar {n}\n"));
-        }
-    }
+/// The header's elements: the vertex element of format `f` ([`vertex_element`] and
+/// `scalar_intensity`, `quality`), then the faces, their indices declared `int` while the
+/// vertex count fits an `i32`.
+fn elements(vertices: u64, faces: u64, f: VertexFormat) -> [Element; 2] {
+    let mut vertex = vertex_element(vertices, f.double, f.normals, f.color);
     if f.intensity {
-        tail.push_str("property float scalar_intensity\n");
+        vertex
+            .props
+            .push(Property::scalar(Scalar::F32, "scalar_intensity"));
     }
     if f.density {
-        tail.push_str("property float quality\n");
+        vertex.props.push(Property::scalar(Scalar::F32, "quality"));
     }
     let index = if vertices <= i32::MAX as u64 {
-        "int"
+        Scalar::I32
     } else {
-        "uint"
+        Scalar::U32
     };
-    tail.push_str(&format!(
-        "element face {faces}\nproperty list uchar {index} vertex_indices\nend_header\n"
-    ));
-    (head, tail)
+    let face = Element::new(
+        "face",
+        faces,
+        vec![Property::list(Scalar::U8, index, "vertex_indices")],
+    );
+    [vertex, face]
 }
 
-/// The padding line: `comment`, a space, spaces up to `len` bytes with its newline.
+/// The padding line's least length: `comment`, a space and its newline.
 const PAD_MIN: usize = "comment \n".len();
 
 /// Bytes of the header of every binary PLY of vertex format `f`.
 pub fn header_bytes(f: VertexFormat) -> usize {
-    let (h, t) = header_parts(u64::MAX, u64::MAX, f, false);
-    h.len() + t.len() + PAD_MIN
+    let els = elements(u64::MAX, u64::MAX, f);
+    header_text(Encoding::BinaryLe, &[WRITTEN_BY], &els).len() + PAD_MIN
 }
 
-/// The binary header for the given counts, padded to exactly `header_bytes(f)` bytes.
+/// The binary header for the given counts, padded to exactly `header_bytes(f)` bytes by a
+/// comment of spaces after [`WRITTEN_BY`].
 pub(crate) fn header(vertices: u64, faces: u64, f: VertexFormat) -> String {
-    let (head, tail) = header_parts(vertices, faces, f, false);
-    let pad = header_bytes(f) - head.len() - tail.len();
-    let mut h = head;
-    h.push_str("comment");
-    h.extend(std::iter::repeat_n(' ', pad - "comment\n".len()));
-    h.push('\n');
-    h.push_str(&tail);
-    h
+    let els = elements(vertices, faces, f);
+    let unpadded = header_text(Encoding::BinaryLe, &[WRITTEN_BY], &els).len();
+    let pad = " ".repeat(header_bytes(f) - unpadded - PAD_MIN);
+    header_text(Encoding::BinaryLe, &[WRITTEN_BY, &pad], &els)
 }
 
 impl MeshWriter {
@@ -86,17 +70,9 @@ impl MeshWriter {
         let mut rec = Vec::with_capacity(vf.stride());
         self.each_vertex(|v, n| {
             rec.clear();
-            for x in v.p {
-                if vf.double {
-                    rec.extend_from_slice(&x.to_le_bytes());
-                } else {
-                    rec.extend_from_slice(&(x as f32).to_le_bytes());
-                }
-            }
+            put_position(&mut rec, v.p, vf.double);
             if vf.normals {
-                for x in n {
-                    rec.extend_from_slice(&x.to_le_bytes());
-                }
+                put_f32(&mut rec, &n);
             }
             if vf.color {
                 rec.extend_from_slice(&v.color);
@@ -122,9 +98,12 @@ impl MeshWriter {
     pub(crate) fn write_ply_ascii(&mut self, w: &mut impl Write) -> Result<()> {
         let (vf, tmp) = (self.vertex_format(), self.tmp_path().to_path_buf());
         let (vertices, faces) = self.counts_out();
-        let (h, t) = header_parts(vertices, faces, vf, true);
+        let h = header_text(
+            Encoding::Ascii,
+            &[WRITTEN_BY],
+            &elements(vertices, faces, vf),
+        );
         w.write_all(h.as_bytes()).with_path(&tmp)?;
-        w.write_all(t.as_bytes()).with_path(&tmp)?;
         let mut line = String::new();
         self.each_vertex(|v, n| {
             line.clear();
@@ -158,5 +137,27 @@ impl MeshWriter {
         self.each_face(true, |[a, b, c]| {
             writeln!(w, "3 {a} {b} {c}").with_path(&tmp)
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_declared_vertex_record_is_the_stride() {
+        for bits in 0..32u32 {
+            let bit = |k: u32| bits & (1 << k) != 0;
+            let f = VertexFormat {
+                color: bit(0),
+                intensity: bit(1),
+                double: bit(2),
+                normals: bit(3),
+                density: bit(4),
+            };
+            let [vertex, face] = elements(3, 1, f);
+            assert_eq!(vertex.fixed_size(), Some(f.stride() as u64), "{f:?}");
+            assert_eq!(face.fixed_size(), None);
+        }
     }
 }

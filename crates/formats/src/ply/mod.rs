@@ -28,8 +28,11 @@
 //!
 //! # Files
 //!
-//! * `header.rs`: the header model ([`PlyHeader`], [`Element`], [`Property`], [`Scalar`],
-//!   [`Encoding`]) and its parser, [`parse_header`];
+//! * `header.rs`: the header model ([`PlyHeader`], [`Element`], [`Property`], [`Scalar`] with
+//!   the table of type names, [`Encoding`] with the `format` keywords) and its parser,
+//!   [`parse_header`], which every reader goes through;
+//! * `write.rs`: the header writer both writers go through (the text of a header from the same
+//!   model), the vertex properties they share and their binary encoding;
 //! * `point_reader/`: [`PlyReader`], the `vertex` element as points (`decode.rs` the records);
 //! * `mesh_reader/`: [`read_mesh`] and [`read_scan_mesh`], the vertices through [`PlyReader`]
 //!   and the triangles from the `face` element (`faces.rs`) or a scan's `range_grid`
@@ -44,6 +47,7 @@ pub(crate) mod mesh_encoder;
 mod mesh_reader;
 mod point_reader;
 pub mod point_writer;
+mod write;
 
 pub use header::{Element, Encoding, PlyHeader, Property, Scalar, parse_header};
 pub use mesh_reader::{ply_face_count, read_mesh, read_scan_mesh};

@@ -208,7 +208,7 @@ fn read_lists(
             read_ascii_faces(&mut src, layout, el.count, line, sink)
         }
         Encoding::BinaryLe | Encoding::BinaryBe => {
-            let be = header.encoding == Encoding::BinaryBe;
+            let be = header.encoding.big_endian();
             src.seek(start.expect("a binary file's element starts are found when it is opened"))?;
             read_binary_faces(&mut src, layout, el.count, be, sink)
         }

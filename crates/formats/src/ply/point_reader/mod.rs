@@ -210,7 +210,7 @@ impl PlyReader {
     }
 
     fn big_endian(&self) -> bool {
-        self.header.encoding == Encoding::BinaryBe
+        self.header.encoding.big_endian()
     }
 
     /// Walk every element's extent; fail on the first one the file does not fully hold.
