@@ -14,23 +14,29 @@
 //! type alone, that its path is a regular file ([`regular_file`]), so a directory, FIFO or
 //! device is named as such and a FIFO is never opened, which would block):
 //!
-//! * [`ply`]: PLY points, ascii and binary (`header.rs` the header, `decode.rs` the records);
+//! * [`ply`]: PLY, read and written on one header model (`header.rs`, parsed by every PLY
+//!   reader, written by both PLY writers through `write.rs`): points, ascii and binary
+//!   (`point_reader/`), meshes (`mesh_reader/`: the `face` element or a scan's `range_grid`),
+//!   and the writers listed below;
 //! * [`las`]: LAS and LAZ;
 //! * [`e57`]: E57, every scan with its pose (one input per scan for ingest);
 //! * [`xyz`]: XYZ / PTS text (`text.rs` the layouts, tokenizer and line walk, `decode.rs` the
 //!   values);
-//! * [`mesh_read`]: PLY meshes, vertices through [`ply`] and the `face` element (`faces.rs`)
-//!   or a scan's `range_grid` (`range_grid.rs`), for `scanflow check`, `fit` and tests, and
-//!   [`mesh_read::read_any_mesh`], which reads OBJ ([`obj`]) and STL ([`stl`]) by extension;
+//! * [`mesh_read`]: meshes in any format, for `scanflow check`, `fit` and tests:
+//!   [`mesh_read::read_any_mesh`] reads OBJ ([`obj`]) and STL ([`stl`]) by extension, PLY
+//!   through [`ply`] (whose [`mesh_read::read_mesh`] and [`mesh_read::read_scan_mesh`] it
+//!   re-exports);
 //! * [`conf`]: the `.conf` scan list (files and their rigid transforms);
 //! * [`fs::mmap`]: the memory-mapped window every binary and text reader reads through
 //!   (in `scanflow-core`).
 //!
 //! Writers, each streaming in memory independent of the file's size:
 //!
-//! * [`ply_write`]: point PLY ([`ply_write::PointPlyWriter`]);
+//! * [`ply_write`]: point PLY ([`ply_write::PointPlyWriter`]; a re-export of
+//!   [`ply::point_writer`]);
 //! * [`mesh_write`]: the streamed mesh of ARCHITECTURE.md step 5, as PLY (binary or ASCII),
-//!   OBJ or STL ([`mesh_write::MeshWriter`]);
+//!   OBJ or STL ([`mesh_write::MeshWriter`]): the API and the staging, and the OBJ and STL
+//!   encoders; the PLY ones are in [`ply`];
 //! * [`preview`]: a PNG picture of a mesh (three views), rasterised as the mesh streams to
 //!   its writer;
 //!
@@ -54,10 +60,11 @@ pub mod mesh_read;
 pub mod mesh_write;
 pub mod obj;
 pub mod ply;
-pub mod ply_write;
 pub mod preview;
 pub mod stl;
 pub mod xyz;
+
+pub use ply::point_writer as ply_write;
 
 use std::path::{Path, PathBuf};
 

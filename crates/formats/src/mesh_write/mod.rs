@@ -74,8 +74,9 @@
 //! every format.
 //!
 //! This module holds the API ([`MeshWriter`], [`MeshFormat`], [`VertexFormat`], [`MeshTarget`]);
-//! `staging` the temporary files where vertices, faces and normals wait until `finish`, and
-//! one encoder module per format: `ply` (binary and ASCII), `obj` and `stl`.
+//! `staging` the temporary files where vertices, faces and normals wait until `finish`; the
+//! encoders: PLY's (binary and ASCII) in [`crate::ply`], with the other PLY readers and
+//! writers, and here `obj` and `stl`, with `text` the numbers the text encoders write.
 
 use std::io::{BufWriter, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
@@ -85,12 +86,12 @@ use crate::error::{Error, IoContext, Result, Setting};
 use crate::fs::atomic::{AtomicFile, with_suffix};
 
 mod obj;
-mod ply;
 mod staging;
 mod stl;
+pub(crate) mod text;
 
-use ply::FACE_BYTES;
-pub use ply::header_bytes;
+use crate::ply::mesh_encoder::FACE_BYTES;
+pub use crate::ply::mesh_encoder::header_bytes;
 use staging::{STAGE_BYTES, STAGE_FACE_BYTES, Stage, Staged, stream_faces};
 use stl::{STL_HEADER, STL_TRIANGLE};
 
@@ -619,7 +620,7 @@ impl MeshWriter {
     }
 
     /// The vertices and triangles the file holds: all those staged, less the islands.
-    fn counts_out(&self) -> (u64, u64) {
+    pub(crate) fn counts_out(&self) -> (u64, u64) {
         match &self.filter {
             Some(f) => (f.vertices, f.triangles),
             None => (self.vertices, self.faces_written),

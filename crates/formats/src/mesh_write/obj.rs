@@ -4,7 +4,7 @@
 use std::io::Write;
 
 use super::MeshWriter;
-use super::ply::num;
+use super::text::num;
 use crate::error::{IoContext, Result};
 
 impl MeshWriter {

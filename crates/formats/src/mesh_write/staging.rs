@@ -5,7 +5,7 @@
 
 use std::fs::File;
 use std::io::{BufReader, BufWriter, Read, Write};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use super::{BUF_BYTES, MeshWriter};
 use crate::error::{Error, IoContext, Result};
@@ -90,11 +90,11 @@ impl Stage {
 
 /// A staged vertex, read back.
 #[derive(Debug, Clone, Copy)]
-pub(super) struct Staged {
-    pub(super) p: [f64; 3],
-    pub(super) color: [u8; 3],
-    pub(super) intensity: f32,
-    pub(super) density: f32,
+pub(crate) struct Staged {
+    pub(crate) p: [f64; 3],
+    pub(crate) color: [u8; 3],
+    pub(crate) intensity: f32,
+    pub(crate) density: f32,
 }
 
 impl Staged {
@@ -138,6 +138,11 @@ pub(super) fn stream_faces(
 
 /// Reading the stages back, for the encoders.
 impl MeshWriter {
+    /// The output's temporary name, which the encoders' errors name.
+    pub(crate) fn tmp_path(&self) -> &Path {
+        &self.tmp_path
+    }
+
     /// The staged vertices, mapped (complete, no longer written: this writer's own file,
     /// which nothing else truncates while the map lives).
     pub(super) fn map_vertices(&mut self) -> Result<crate::fs::mmap::Window> {
@@ -159,7 +164,7 @@ impl MeshWriter {
 
     /// Each vertex written with its normal (zero without normals), in order: every staged
     /// one but those of dropped islands.
-    pub(super) fn each_vertex(
+    pub(crate) fn each_vertex(
         &mut self,
         mut f: impl FnMut(Staged, [f32; 3]) -> Result<()>,
     ) -> Result<()> {
@@ -188,7 +193,7 @@ impl MeshWriter {
 
     /// Each face written, in order: every staged one but those of dropped islands, its
     /// corners numbered as written (`renumber`) or as staged.
-    pub(super) fn each_face(
+    pub(crate) fn each_face(
         &mut self,
         renumber: bool,
         mut f: impl FnMut([u32; 3]) -> Result<()>,

@@ -1,5 +1,7 @@
-//! The PLY header: scalar types, elements and their properties, parsed from the first bytes
-//! of a file by [`parse_header`].
+//! The PLY header model, shared by every PLY reader and writer: scalar types (the table of
+//! their names in both spellings), encodings (the `format` keywords), elements and their
+//! properties; parsed from the first bytes of a file by [`parse_header`], written by
+//! `write.rs` from the same types.
 
 use std::path::Path;
 
@@ -26,20 +28,31 @@ pub enum Scalar {
     F64,
 }
 
+/// The scalar types' names, in the order of [`Scalar`]'s variants: the specification's
+/// spelling (the one written), then the sized one (both read).
+const SCALAR_NAMES: [(Scalar, &str, &str); 8] = [
+    (Scalar::I8, "char", "int8"),
+    (Scalar::U8, "uchar", "uint8"),
+    (Scalar::I16, "short", "int16"),
+    (Scalar::U16, "ushort", "uint16"),
+    (Scalar::I32, "int", "int32"),
+    (Scalar::U32, "uint", "uint32"),
+    (Scalar::F32, "float", "float32"),
+    (Scalar::F64, "double", "float64"),
+];
+
 impl Scalar {
     /// Parse a type name in either spelling.
     pub fn parse(s: &str) -> Option<Scalar> {
-        Some(match s {
-            "char" | "int8" => Scalar::I8,
-            "uchar" | "uint8" => Scalar::U8,
-            "short" | "int16" => Scalar::I16,
-            "ushort" | "uint16" => Scalar::U16,
-            "int" | "int32" => Scalar::I32,
-            "uint" | "uint32" => Scalar::U32,
-            "float" | "float32" => Scalar::F32,
-            "double" | "float64" => Scalar::F64,
-            _ => return None,
-        })
+        SCALAR_NAMES
+            .iter()
+            .find(|&&(_, name, sized)| s == name || s == sized)
+            .map(|&(ty, _, _)| ty)
+    }
+
+    /// The type's name as written: the specification's spelling (`char` … `double`).
+    pub fn name(self) -> &'static str {
+        SCALAR_NAMES[self as usize].1
     }
 
     /// Size in bytes.
@@ -79,7 +92,7 @@ impl Scalar {
     }
 
     /// Whether the type is `float` or `double`.
-    pub(super) fn is_float(self) -> bool {
+    pub fn is_float(self) -> bool {
         matches!(self, Scalar::F32 | Scalar::F64)
     }
 
@@ -119,8 +132,25 @@ pub enum Property {
 }
 
 impl Property {
+    /// A scalar property (of an element to be written).
+    pub fn scalar(ty: Scalar, name: &str) -> Property {
+        Property::Scalar {
+            name: name.to_string(),
+            ty,
+        }
+    }
+
+    /// A list property (of an element to be written).
+    pub fn list(count: Scalar, item: Scalar, name: &str) -> Property {
+        Property::List {
+            name: name.to_string(),
+            count,
+            item,
+        }
+    }
+
     /// The property's name.
-    pub(super) fn name(&self) -> &str {
+    pub fn name(&self) -> &str {
         match self {
             Property::Scalar { name, .. } | Property::List { name, .. } => name,
         }
@@ -136,13 +166,23 @@ pub struct Element {
     pub count: u64,
     /// Properties in file order.
     pub props: Vec<Property>,
-    /// Header line (1-based) that declared it.
+    /// Header line (1-based) that declared it; 0 for an element to be written.
     pub line: u64,
 }
 
 impl Element {
+    /// An element to be written: `count` records of properties `props`.
+    pub fn new(name: &str, count: u64, props: Vec<Property>) -> Element {
+        Element {
+            name: name.to_string(),
+            count,
+            props,
+            line: 0,
+        }
+    }
+
     /// Size of one record when it has no list, in bytes.
-    pub(super) fn fixed_size(&self) -> Option<u64> {
+    pub fn fixed_size(&self) -> Option<u64> {
         let mut s = 0u64;
         for p in &self.props {
             match p {
@@ -165,6 +205,34 @@ pub enum Encoding {
     BinaryBe,
 }
 
+/// The encodings' keywords on the `format` line.
+const ENCODING_KEYWORDS: [(Encoding, &str); 3] = [
+    (Encoding::Ascii, "ascii"),
+    (Encoding::BinaryLe, "binary_little_endian"),
+    (Encoding::BinaryBe, "binary_big_endian"),
+];
+
+impl Encoding {
+    /// The encoding of a `format` line's keyword.
+    pub fn parse(s: &str) -> Option<Encoding> {
+        ENCODING_KEYWORDS
+            .iter()
+            .find(|&&(_, k)| k == s)
+            .map(|&(e, _)| e)
+    }
+
+    /// The keyword of the `format` line (`ascii`, `binary_little_endian`,
+    /// `binary_big_endian`).
+    pub fn keyword(self) -> &'static str {
+        ENCODING_KEYWORDS[self as usize].1
+    }
+
+    /// Whether binary values are stored big endian.
+    pub fn big_endian(self) -> bool {
+        self == Encoding::BinaryBe
+    }
+}
+
 /// A parsed PLY header.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PlyHeader {
@@ -176,6 +244,9 @@ pub struct PlyHeader {
     pub data_start: u64,
     /// Number of header lines, `end_header` included.
     pub lines: u64,
+    /// The `obj_info` lines, in order: the header line (1-based) and the words after the
+    /// keyword, joined by single spaces (a range scan's `num_cols 640`, say).
+    pub obj_info: Vec<(u64, String)>,
 }
 
 /// Parse a header from the first bytes of a file. `bytes` may be longer than the header.
@@ -184,6 +255,7 @@ pub fn parse_header(path: &Path, bytes: &[u8]) -> Result<PlyHeader> {
     let mut line_no = 0u64;
     let mut encoding = None;
     let mut elements: Vec<Element> = Vec::new();
+    let mut obj_info = Vec::new();
     loop {
         let Some(nl) = bytes[pos..].iter().position(|&b| b == b'\n') else {
             return Err(Error::format(
@@ -226,7 +298,8 @@ pub fn parse_header(path: &Path, bytes: &[u8]) -> Result<PlyHeader> {
         }
         match toks.first().copied() {
             None => continue,
-            Some("comment") | Some("obj_info") => continue,
+            Some("comment") => continue,
+            Some("obj_info") => obj_info.push((line_no, toks[1..].join(" "))),
             Some("format") => encoding = Some(parse_format(&toks, line, &bad)?),
             Some("element") => elements.push(parse_element(&toks, line, line_no, &bad)?),
             Some("property") => {
@@ -261,6 +334,7 @@ pub fn parse_header(path: &Path, bytes: &[u8]) -> Result<PlyHeader> {
         elements,
         data_start: pos as u64,
         lines: line_no,
+        obj_info,
     })
 }
 
@@ -274,15 +348,11 @@ fn parse_format(toks: &[&str], line: &str, bad: &dyn Fn(String) -> Error) -> Res
             "expected \"format <ascii|binary_little_endian|binary_big_endian> 1.0\", found \"{line}\""
         )));
     }
-    Ok(match toks[1] {
-        "ascii" => Encoding::Ascii,
-        "binary_little_endian" => Encoding::BinaryLe,
-        "binary_big_endian" => Encoding::BinaryBe,
-        other => {
-            return Err(bad(format!(
-                "unknown PLY format \"{other}\", expected ascii, binary_little_endian or binary_big_endian"
-            )));
-        }
+    Encoding::parse(toks[1]).ok_or_else(|| {
+        bad(format!(
+            "unknown PLY format \"{}\", expected ascii, binary_little_endian or binary_big_endian",
+            toks[1]
+        ))
     })
 }
 

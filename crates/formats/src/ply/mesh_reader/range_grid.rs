@@ -23,44 +23,31 @@
 //! face `+z`. Blocks are visited row by row, then column by column, so the triangles' order is
 //! fixed by the file.
 
-use std::fs::File;
-use std::io::Read;
 use std::path::Path;
 
 use super::faces::ListSink;
-use crate::error::{Error, IoContext, Location, Result};
-use crate::ply::Element;
+use crate::error::{Error, Location, Result};
+use crate::ply::{Element, PlyHeader};
 
 /// Pixel value of an empty pixel.
 pub(super) const EMPTY: u32 = u32::MAX;
 
-/// Bytes read to find the header's `obj_info` lines.
-const HEADER_BYTES: u64 = 1 << 20;
-
-/// The grid's `(columns, rows)` from the header's `obj_info num_cols` / `num_rows` lines,
-/// checked against the `range_grid` element's record count.
-pub(super) fn grid_size(path: &Path, el: &Element) -> Result<(usize, usize)> {
-    let mut head = Vec::new();
-    File::open(path)
-        .with_path(path)?
-        .take(HEADER_BYTES)
-        .read_to_end(&mut head)
-        .with_path(path)?;
+/// The grid's `(columns, rows)` from the header's `obj_info num_cols` / `num_rows` lines
+/// (the last of each), checked against the `range_grid` element `el`'s record count.
+pub(super) fn grid_size(path: &Path, header: &PlyHeader, el: &Element) -> Result<(usize, usize)> {
     let (mut cols, mut rows) = (None, None);
-    for (i, raw) in head.split(|&b| b == b'\n').enumerate() {
-        let line = String::from_utf8_lossy(raw);
-        let toks: Vec<&str> = line.split_ascii_whitespace().collect();
+    for (line, info) in &header.obj_info {
+        let toks: Vec<&str> = info.split_ascii_whitespace().collect();
         let slot = match toks.as_slice() {
-            ["end_header"] => break,
-            ["obj_info", "num_cols", _] => &mut cols,
-            ["obj_info", "num_rows", _] => &mut rows,
+            ["num_cols", _] => &mut cols,
+            ["num_rows", _] => &mut rows,
             _ => continue,
         };
-        let v: usize = toks[2].parse().map_err(|_| {
+        let v: usize = toks[1].parse().map_err(|_| {
             Error::format(
                 path,
-                Location::Line(i as u64 + 1),
-                format!("obj_info {} \"{}\" is not a count", toks[1], toks[2]),
+                Location::Line(*line),
+                format!("obj_info {} \"{}\" is not a count", toks[0], toks[1]),
             )
         })?;
         *slot = Some(v);

@@ -1,5 +1,5 @@
 //! Reading the `face` element: its layout, the corner indices of each record (binary or
-//! ascii), fan triangulation, and skipping the elements before it.
+//! ascii) and fan triangulation.
 
 use std::fs::File;
 use std::io::{BufRead, BufReader, Read, Seek, SeekFrom};
@@ -8,18 +8,11 @@ use std::path::Path;
 use crate::error::{Error, IoContext, Location, Result};
 use crate::ply::{Element, Property, Scalar};
 
-/// A face property: only sizes matter, except for the index list.
-#[derive(Debug, Clone, Copy)]
-pub(super) enum FaceProp {
-    Scalar(Scalar),
-    List { count: Scalar, item: Scalar },
-}
-
 /// The face element's (or another element of index lists') properties and which one holds
-/// the corner indices.
+/// the corner indices. Of the other properties only the sizes matter.
 #[derive(Debug)]
 pub(super) struct FaceLayout {
-    pub(super) props: Vec<FaceProp>,
+    pub(super) props: Vec<Property>,
     /// Position of the index list in `props`.
     pub(super) indices: usize,
     /// What one record is called in messages ("face", "range_grid entry").
@@ -47,13 +40,7 @@ impl FaceLayout {
                 .position(|p| matches!(p, Property::List { name, .. } if name == want))
         };
         let Some(indices) = find("vertex_indices").or_else(|| find("vertex_index")) else {
-            let names: Vec<&str> = face
-                .props
-                .iter()
-                .map(|p| match p {
-                    Property::Scalar { name, .. } | Property::List { name, .. } => name.as_str(),
-                })
-                .collect();
+            let names: Vec<&str> = face.props.iter().map(Property::name).collect();
             return Err(Error::format(
                 path,
                 Location::Line(face.line),
@@ -68,19 +55,9 @@ impl FaceLayout {
                 ),
             ));
         };
-        let props: Vec<FaceProp> = face
-            .props
-            .iter()
-            .map(|p| match p {
-                Property::Scalar { ty, .. } => FaceProp::Scalar(*ty),
-                Property::List { count, item, .. } => FaceProp::List {
-                    count: *count,
-                    item: *item,
-                },
-            })
-            .collect();
-        if let FaceProp::List { item, .. } = props[indices]
-            && matches!(item, Scalar::F32 | Scalar::F64)
+        let props = face.props.clone();
+        if let Property::List { item, .. } = props[indices]
+            && item.is_float()
         {
             return Err(Error::format(
                 path,
@@ -228,69 +205,6 @@ impl Source<'_> {
     }
 }
 
-/// Skip a binary element that comes before `face`.
-pub(super) fn skip_binary_element(src: &mut Source<'_>, el: &Element, be: bool) -> Result<()> {
-    let fixed: Option<u64> = el.props.iter().try_fold(0u64, |s, p| match p {
-        Property::Scalar { ty, .. } => Some(s + ty.size() as u64),
-        Property::List { .. } => None,
-    });
-    let truncated = |src: &Source<'_>, rec: u64| {
-        Error::format(
-            src.path,
-            Location::Byte(src.pos),
-            format!(
-                "truncated: the header promises {} \"{}\" records, but the file ends at byte {} inside record {rec}",
-                el.count, el.name, src.file_len
-            ),
-        )
-    };
-    if let Some(size) = fixed {
-        let bytes = size.saturating_mul(el.count);
-        if !src.has(bytes) {
-            let rec = (src.file_len.saturating_sub(src.pos))
-                .checked_div(size)
-                .unwrap_or(0);
-            return Err(truncated(src, rec));
-        }
-        return src.skip(bytes);
-    }
-    for rec in 0..el.count {
-        for p in &el.props {
-            match p {
-                Property::Scalar { ty, .. } => {
-                    if !src.has(ty.size() as u64) {
-                        return Err(truncated(src, rec));
-                    }
-                    src.skip(ty.size() as u64)?;
-                }
-                Property::List { count, item, .. } => {
-                    if !src.has(count.size() as u64) {
-                        return Err(truncated(src, rec));
-                    }
-                    let at = src.pos;
-                    let n = src.value(*count, be)?;
-                    if n < 0.0 {
-                        return Err(Error::format(
-                            src.path,
-                            Location::Byte(at),
-                            format!(
-                                "\"{}\" record {rec} has a negative list length {n}",
-                                el.name
-                            ),
-                        ));
-                    }
-                    let bytes = (n as u64).saturating_mul(item.size() as u64);
-                    if !src.has(bytes) {
-                        return Err(truncated(src, rec));
-                    }
-                    src.skip(bytes)?;
-                }
-            }
-        }
-    }
-    Ok(())
-}
-
 /// Read `count` binary face records starting at the source's position.
 pub(super) fn read_binary_faces(
     src: &mut Source<'_>,
@@ -313,13 +227,15 @@ pub(super) fn read_binary_faces(
         };
         for (k, p) in layout.props.iter().enumerate() {
             match *p {
-                FaceProp::Scalar(ty) => {
+                Property::Scalar { ty, .. } => {
                     if !src.has(ty.size() as u64) {
                         return Err(truncated(src));
                     }
                     src.skip(ty.size() as u64)?;
                 }
-                FaceProp::List { count: cty, item } => {
+                Property::List {
+                    count: cty, item, ..
+                } => {
                     if !src.has(cty.size() as u64) {
                         return Err(truncated(src));
                     }
@@ -402,7 +318,7 @@ pub(super) fn read_ascii_faces(
         };
         for (k, p) in layout.props.iter().enumerate() {
             match *p {
-                FaceProp::Scalar(_) => {
+                Property::Scalar { .. } => {
                     // Skipped unparsed, but it must be there.
                     if toks.next().is_none() {
                         return Err(bad(format!(
@@ -412,7 +328,7 @@ pub(super) fn read_ascii_faces(
                         )));
                     }
                 }
-                FaceProp::List { .. } => {
+                Property::List { .. } => {
                     let n = int(toks.next(), "a list length")?;
                     if n < 0 {
                         return Err(bad(format!(

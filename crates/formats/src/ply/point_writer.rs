@@ -1,4 +1,4 @@
-//! Streaming binary-little-endian PLY point writer.
+//! Streaming binary-little-endian PLY point writer (also reached as [`crate::ply_write`]).
 //!
 //! [`PointPlyWriter`] writes a header announcing a fixed number of points, then appends
 //! [`PointBatch`]es as they come, so that memory stays proportional to one batch whatever the
@@ -8,13 +8,18 @@
 //! writer dropped without `finish` (an error upstream, a panic) removes its temporary file.
 //!
 //! Layout of one vertex record, in this order, each part only when its attribute was asked
-//! for: `x y z` (float32), `nx ny nz` (float32), `red green blue` (uchar), `alpha` (uchar),
-//! `intensity` (float32), `confidence` (float32). Colours are the high byte of the 16-bit
-//! channels of [`PointBatch::color`].
+//! for: `x y z` (float32, or float64 with [`PointFileOptions::double`]), `nx ny nz` (float32), `red green blue` (uchar), `alpha` (uchar),
+//! `intensity` (float32), `confidence` (float32), then the extra scalar of
+//! [`PointFileOptions::scalar`] (float32). Colours are the high byte of the 16-bit channels of
+//! [`PointBatch::color`]. The header is written from the model the readers parse into
+//! (`write.rs`), its vertex element starting as the mesh encoders' does; the record's size is
+//! the one its header declares.
 
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
+use super::write::{WRITTEN_BY, header_text, put_f32, put_position, vertex_element};
+use super::{Element, Encoding, Property, Scalar};
 use crate::error::{Error, IoContext, Result};
 use crate::fs::atomic::AtomicFile;
 use crate::types::{Attributes, PointBatch};
@@ -58,63 +63,24 @@ pub struct PointFileOptions {
     pub scalar: Option<String>,
 }
 
-/// The PLY header for `count` points carrying `attrs`.
-fn header(count: u64, attrs: Attributes, opts: &PointFileOptions) -> String {
-    let mut h = String::with_capacity(256);
-    h.push_str("ply\nformat binary_little_endian 1.0\ncomment written by scanflow\n");
-    h.push_str(&format!("element vertex {count}\n"));
-    let ty = if opts.double { "double" } else { "float" };
-    for n in ["x", "y", "z"] {
-        h.push_str(&format!("property {ty} {n}\n"));
-    }
-    if attrs.normal {
-        for n in ["nx", "ny", "nz"] {
-            h.push_str(&format!("property float {n}\n"));
-        }
-    }
-    if attrs.color {
-        for n in ["red", "green", "blue"] {
-            h.push_str(&format!("property uchar {n}\n"));
-        }
-        if attrs.alpha {
-            h.push_str("property uchar alpha\n");
-        }
+/// The `vertex` element of `count` points carrying `attrs`: [`vertex_element`]'s properties,
+/// then `alpha`, `intensity`, `confidence` and the extra scalar, as the module docs list them.
+fn vertex(count: u64, attrs: Attributes, opts: &PointFileOptions) -> Element {
+    let mut v = vertex_element(count, opts.double, attrs.normal, attrs.color);
+    let mut add = |ty: Scalar, name: &str| v.props.push(Property::scalar(ty, name));
+    if attrs.color && attrs.alpha {
+        add(Scalar::U8, "alpha");
     }
     if attrs.intensity {
-        h.push_str("property float intensity\n");
+        add(Scalar::F32, "intensity");
     }
     if attrs.confidence {
-        h.push_str("property float confidence\n");
+        add(Scalar::F32, "confidence");
     }
     if let Some(name) = &opts.scalar {
-        h.push_str(&format!("property float {name}\n"));
+        add(Scalar::F32, name.as_str());
     }
-    h.push_str("end_header\n");
-    h
-}
-
-/// Bytes of one record carrying `attrs`.
-fn record_bytes(attrs: Attributes, opts: &PointFileOptions) -> usize {
-    let mut n = if opts.double { 24 } else { 12 };
-    if opts.scalar.is_some() {
-        n += 4;
-    }
-    if attrs.normal {
-        n += 12;
-    }
-    if attrs.color {
-        n += 3;
-        if attrs.alpha {
-            n += 1;
-        }
-    }
-    if attrs.intensity {
-        n += 4;
-    }
-    if attrs.confidence {
-        n += 4;
-    }
-    n
+    v
 }
 
 impl PointPlyWriter {
@@ -144,6 +110,8 @@ impl PointPlyWriter {
         if path.as_os_str().is_empty() {
             return Err(Error::Usage("empty output file name".to_string()));
         }
+        let vertex = vertex(count, attrs, &opts);
+        let stride = vertex.fixed_size().expect("a vertex element of scalars") as usize;
         let file = AtomicFile::create(path)?;
         let mut w = PointPlyWriter {
             final_path: path.to_path_buf(),
@@ -152,12 +120,12 @@ impl PointPlyWriter {
             attrs,
             count,
             written: 0,
-            stride: record_bytes(attrs, &opts),
+            stride,
             scratch: Vec::new(),
             opts,
         };
         // From here on, a failure drops `w`, which removes the temporary file.
-        let h = header(count, attrs, &w.opts);
+        let h = header_text(Encoding::BinaryLe, &[WRITTEN_BY], &[vertex]);
         w.sink()?.write_all(h.as_bytes()).with_path(&w.tmp_path)?;
         Ok(w)
     }
@@ -285,17 +253,9 @@ impl PointPlyWriter {
             scratch.clear();
             scratch.reserve(stride * (end - start));
             for i in start..end {
-                for v in batch.pos[i] {
-                    if double {
-                        scratch.extend_from_slice(&v.to_le_bytes());
-                    } else {
-                        scratch.extend_from_slice(&(v as f32).to_le_bytes());
-                    }
-                }
+                put_position(&mut scratch, batch.pos[i], double);
                 if attrs.normal {
-                    for v in batch.normal[i] {
-                        scratch.extend_from_slice(&v.to_le_bytes());
-                    }
+                    put_f32(&mut scratch, &batch.normal[i]);
                 }
                 if attrs.color {
                     let c = batch.color[i];
