@@ -61,9 +61,11 @@
 //!    over `q ∈ ℝ⁹ᴺ`, dropping `|q| = 1`: a sparse SPD system `(L ⊗ I₉ + B) q = b` (`L` the
 //!    weighted dual-graph Laplacian, `B` the 9 × 9 boundary blocks, plus `10⁻¹⁰·mean degree` on
 //!    the diagonal). It is solved by preconditioned conjugate gradients whose preconditioner is
-//!    the sparse Cholesky factor (faer, sequential, AMD ordering) of the *scalar* matrix
-//!    `L + diag(λₜ)` applied to the 9 columns: the coupled 9N × 9N factor would hold 81 times
-//!    the fill; this one is exact away from the boundary's two free directions per tet.
+//!    the sparse Cholesky factor (faer through [`crate::sparse`], sequential, AMD ordering)
+//!    of the *scalar* matrix `L + diag(λₜ)` applied to the 9 columns: the coupled 9N × 9N
+//!    factor would hold 81 times the fill; this one is exact away from the boundary's two free
+//!    directions per tet. Its symbolic analysis is kept for step 3's matrix, which has the
+//!    same pattern.
 //! 2. Projection (Huang §5.1, Ray §4.2): each `q` is normalised and replaced by the closest
 //!    frame, [`sh_to_frame`]: the best of ~480 fixed candidate frames (axis on a Fibonacci
 //!    sphere restricted to one face cone of the cube, six twists 15° apart, ≈10° apart in all),
@@ -94,15 +96,11 @@
 
 use std::sync::OnceLock;
 
-use faer::dyn_stack::{MemBuffer, MemStack};
-use faer::linalg::cholesky::llt::factor::LltRegularization;
-use faer::sparse::linalg::cholesky::{LltRef, SymbolicCholesky, factorize_symbolic_cholesky};
-use faer::sparse::{SparseColMat, SymbolicSparseColMat};
-use faer::{Conj, Mat, Par, Side};
 use rayon::prelude::*;
 
 use super::mesh::{FACE_OPPOSITE, Frame, NO_TET, TetMesh};
 use crate::geom::vec::{add, cross, dot, norm, scale, sub};
+use crate::sparse::{LowerMatrix, NumericFactor, SymbolicFactor};
 
 /// `√(7/12)`: the `m = 0` coefficient of the identity frame.
 pub const SQRT_7_12: f64 = 0.763_762_615_825_973_4;
@@ -705,7 +703,7 @@ fn setup(mesh: &TetMesh, nb: &[[u32; 4]], params: &SmoothParams) -> Result<Setup
 }
 
 /// The scalar matrix `L + diag(extra)`, lower triangle, in compressed columns.
-fn scalar_matrix(nb: &[[u32; 4]], s: &Setup, extra: &[f64]) -> SparseColMat<usize, f64> {
+fn scalar_matrix(nb: &[[u32; 4]], s: &Setup, extra: &[f64]) -> LowerMatrix {
     let n = nb.len();
     let mut col_ptr = Vec::with_capacity(n + 1);
     let mut rows = Vec::with_capacity(3 * n);
@@ -725,54 +723,7 @@ fn scalar_matrix(nb: &[[u32; 4]], s: &Setup, extra: &[f64]) -> SparseColMat<usiz
         }
         col_ptr.push(rows.len());
     }
-    SparseColMat::new(
-        SymbolicSparseColMat::new_checked(n, n, col_ptr, None, rows),
-        vals,
-    )
-}
-
-/// A numeric sparse Cholesky factor on a shared symbolic analysis.
-struct Factor<'a> {
-    sym: &'a SymbolicCholesky<usize>,
-    values: Vec<f64>,
-}
-
-impl Factor<'_> {
-    fn new<'a>(
-        sym: &'a SymbolicCholesky<usize>,
-        a: &SparseColMat<usize, f64>,
-    ) -> Result<Factor<'a>, SmoothError> {
-        let mut values = vec![0.0; sym.len_val()];
-        let req = sym.factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default());
-        let mut mem =
-            MemBuffer::try_new(req).map_err(|e| SmoothError::Factorization(format!("{e:?}")))?;
-        sym.factorize_numeric_llt::<f64>(
-            &mut values,
-            a.as_ref(),
-            Side::Lower,
-            LltRegularization::default(),
-            Par::Seq,
-            MemStack::new(&mut mem),
-            Default::default(),
-        )
-        .map_err(|e| SmoothError::Factorization(format!("{e:?}")))?;
-        Ok(Factor { sym, values })
-    }
-
-    /// Solves for the 9 components at once.
-    fn solve(&self, rhs: &[[f64; 9]]) -> Vec<[f64; 9]> {
-        let n = rhs.len();
-        let mut x = Mat::from_fn(n, 9, |i, j| rhs[i][j]);
-        let req = self.sym.solve_in_place_scratch::<f64>(9, Par::Seq);
-        let mut mem = MemBuffer::new(req);
-        LltRef::new(self.sym, &self.values).solve_in_place_with_conj(
-            Conj::No,
-            x.as_mut(),
-            Par::Seq,
-            MemStack::new(&mut mem),
-        );
-        (0..n).map(|i| std::array::from_fn(|j| x[(i, j)])).collect()
-    }
+    LowerMatrix::from_columns(n, col_ptr, rows, vals)
 }
 
 /// Chunked sum, fixed order whatever the thread count.
@@ -819,7 +770,7 @@ fn relaxed_apply(nb: &[[u32; 4]], s: &Setup, x: &[[f64; 9]]) -> Vec<[f64; 9]> {
 fn pcg(
     nb: &[[u32; 4]],
     s: &Setup,
-    pre: &Factor,
+    pre: &NumericFactor,
     b: &[[f64; 9]],
     tol: f64,
     max_iter: usize,
@@ -1010,14 +961,8 @@ pub fn smooth_frames(
 
     // 1. The relaxed field.
     let pre_matrix = scalar_matrix(nb, &s, &s.lambda);
-    let sym = factorize_symbolic_cholesky(
-        pre_matrix.symbolic(),
-        Side::Lower,
-        Default::default(),
-        Default::default(),
-    )
-    .map_err(|e| SmoothError::Factorization(format!("{e:?}")))?;
-    report.factor_nonzeros = sym.len_val();
+    let sym = SymbolicFactor::new(&pre_matrix).map_err(SmoothError::Factorization)?;
+    report.factor_nonzeros = sym.nonzeros();
     let rhs: Vec<[f64; 9]> = s
         .kind
         .iter()
@@ -1029,7 +974,9 @@ pub fn smooth_frames(
         })
         .collect();
     let (q_relaxed, its, rel) = {
-        let pre = Factor::new(&sym, &pre_matrix)?;
+        let pre = sym
+            .factor(&pre_matrix)
+            .map_err(SmoothError::Factorization)?;
         pcg(
             nb,
             &s,
@@ -1056,7 +1003,7 @@ pub fn smooth_frames(
             .map(|t| s.lambda[t] + params.proximal_weight * s.deg[t])
             .collect();
         let m = scalar_matrix(nb, &s, &pull);
-        let fac = Factor::new(&sym, &m)?;
+        let fac = sym.factor(&m).map_err(SmoothError::Factorization)?;
         drop(m);
         for _ in 0..params.iterations {
             let rhs: Vec<[f64; 9]> = q
