@@ -621,18 +621,58 @@ pub fn parameterise_with(
     field: &Field<'_>,
     params: &ParamParams,
 ) -> Result<(GridMap, ParamReport), ParamError> {
-    let (frames, m, singular) = (field.frames, field.matchings, field.singular);
     if !(params.scale.is_finite() && params.scale > 0.0) {
         return Err(ParamError::Scale(params.scale));
     }
+    let cut = build_cut(mesh, topo, field.matchings);
+    let mut report = ParamReport::default();
+    let cv = cut_vertices(mesh, topo, &cut);
+    report.cut_vertices = cv.count as usize;
+    let (names, rows) = constraint_rows(mesh, topo, field, &cut, &cv, &mut report);
+    let base = 3 * cv.count;
+    let mut elim = eliminate(&rows, base, &names)?;
+    let local = local_energies(mesh, field, &cut, params);
+    let rounder = Rounder {
+        params,
+        names: &names,
+        base,
+        nvar: (base as usize) + names.len(),
+        cv: &cv,
+        local: &local,
+    };
+    let values = rounder.run(&mut elim, &mut report)?;
+    Ok((grid_map(mesh, topo, &cut, &cv.corner_cv, &values), report))
+}
+
+/// The local index of vertex `v` in tetrahedron `t`.
+fn local(mesh: &TetMesh, t: usize, v: u32) -> usize {
+    mesh.tets[t].iter().position(|&x| x == v).expect("vertex")
+}
+
+/// The copies of the mesh's vertices the cut leaves: corners joined across glued faces share
+/// one, and each has three unknowns (module docs, "Transitions and the cut").
+struct CutVertices {
+    /// Per corner `4 t + j`, its cut vertex.
+    corner_cv: Vec<u32>,
+    /// How many there are.
+    count: u32,
+    /// Each one's position (its mesh vertex's).
+    pos: Vec<[f64; 3]>,
+}
+
+impl CutVertices {
+    /// The unknown of parameter `r` at corner `j` of tetrahedron `t`.
+    fn xvar(&self, t: usize, j: usize, r: usize) -> u32 {
+        3 * self.corner_cv[4 * t + j] + r as u32
+    }
+}
+
+/// Corners → cut vertices: union across glued faces, numbered in the order of their first
+/// corner.
+fn cut_vertices(mesh: &TetMesh, topo: &Topology, cut: &Cut) -> CutVertices {
     let nt = mesh.tets.len();
     let nb = &topo.neighbours;
-    let cut = build_cut(mesh, topo, m);
-    let mut report = ParamReport::default();
-
-    // Corners → cut vertices: union across glued faces.
     let mut parent: Vec<u32> = (0..4 * nt as u32).collect();
-    let local = |t: usize, v: u32| mesh.tets[t].iter().position(|&x| x == v).expect("vertex");
     for t in 0..nt {
         for i in 0..4 {
             let s = nb[t][i];
@@ -641,7 +681,7 @@ pub fn parameterise_with(
             }
             for j in FACE_OPPOSITE[i] {
                 let v = mesh.tets[t][j];
-                let b = (4 * s as usize + local(s as usize, v)) as u32;
+                let b = (4 * s as usize + local(mesh, s as usize, v)) as u32;
                 union(&mut parent, (4 * t + j) as u32, b);
             }
         }
@@ -657,21 +697,24 @@ pub fn parameterise_with(
         }
         corner_cv[c] = cv_of_root[r];
     }
-    report.cut_vertices = ncv as usize;
     let mut cv_pos = vec![[0.0; 3]; ncv as usize];
     for (c, &cv) in corner_cv.iter().enumerate() {
         cv_pos[cv as usize] = mesh.verts[mesh.tets[c / 4][c % 4] as usize];
     }
-    let xvar = |t: usize, j: usize, r: usize| 3 * corner_cv[4 * t + j] + r as u32;
+    CutVertices {
+        corner_cv,
+        count: ncv,
+        pos: cv_pos,
+    }
+}
 
-    // Integer variables.
-    let mut names: Vec<IntegerVar> = Vec::new();
-    let base = 3 * ncv;
-    let mut rows: Vec<(Vec<(u32, f64)>, f64)> = Vec::new();
-    // The aligned axis of each boundary face's plane: the given one, or the one nearest its
-    // normal.
-    let face_axis: Vec<usize> = topo
-        .boundary
+/// A linear constraint `Σ cᵢ yᵢ = rhs`: the terms and the right-hand side.
+type Row = (Vec<(u32, f64)>, f64);
+
+/// The aligned axis of each boundary face's plane: the given one ([`Field::axes`]), or the
+/// frame axis nearest its normal.
+fn face_axes(mesh: &TetMesh, topo: &Topology, field: &Field<'_>, cut: &Cut) -> Vec<usize> {
+    topo.boundary
         .iter()
         .enumerate()
         .map(|(face, &(t, i))| {
@@ -686,14 +729,35 @@ pub fn parameterise_with(
                 None => {
                     let f = FACE_OPPOSITE[i].map(|j| mesh.verts[mesh.tets[t][j] as usize]);
                     let n = cross(sub(f[1], f[0]), sub(f[2], f[0]));
-                    let fr = aligned_frame(&frames[t], cut.chart[t]);
+                    let fr = aligned_frame(&field.frames[t], cut.chart[t]);
                     (0..3)
                         .max_by(|&a, &b| dot(fr[a], n).abs().total_cmp(&dot(fr[b], n).abs()))
                         .expect("three axes")
                 }
             }
         })
-        .collect();
+        .collect()
+}
+
+/// The integer unknowns (numbered after the `3 · cv.count` continuous ones, named) and the
+/// constraints of the module docs: the translation anchors, the cut faces' transitions with
+/// their gaps (counted in [`ParamReport::cut_faces`]), the boundary faces' integer planes
+/// and the singular edges' integer lines.
+fn constraint_rows(
+    mesh: &TetMesh,
+    topo: &Topology,
+    field: &Field<'_>,
+    cut: &Cut,
+    cv: &CutVertices,
+    report: &mut ParamReport,
+) -> (Vec<IntegerVar>, Vec<Row>) {
+    let nt = mesh.tets.len();
+    let nb = &topo.neighbours;
+    let xvar = |t: usize, j: usize, r: usize| cv.xvar(t, j, r);
+    let mut names: Vec<IntegerVar> = Vec::new();
+    let base = 3 * cv.count;
+    let mut rows: Vec<Row> = Vec::new();
+    let face_axis = face_axes(mesh, topo, field, cut);
     // Translation: per axis, a vertex of the first boundary face on a plane of that axis at
     // 0 (so the grid is anchored on a boundary plane, and rounding the other planes cannot
     // pinch the solid against an anchor inside it); the first corner when no face has it.
@@ -726,7 +790,7 @@ pub fn parameterise_with(
             let rot = cut.aligned[t][i].matrix();
             for j in FACE_OPPOSITE[i] {
                 let v = mesh.tets[t][j];
-                let js = local(s, v);
+                let js = local(mesh, s, v);
                 for (r, rot_r) in rot.iter().enumerate() {
                     let mut row = vec![(xvar(s, js, r), 1.0), (g0 + r as u32, -1.0)];
                     for (k, &c) in rot_r.iter().enumerate() {
@@ -752,7 +816,7 @@ pub fn parameterise_with(
         }
     }
     // Singular edges on integer lines of their axis.
-    for e in singular {
+    for e in field.singular {
         let t0 = topo.star(e.edge as usize)[0] as usize;
         let rm = cut.chart[t0].matrix();
         let axis = (0..3)
@@ -765,24 +829,63 @@ pub fn parameterise_with(
                 axis: other as u8,
             });
             for v in e.verts {
-                rows.push((vec![(xvar(t0, local(t0, v), other), 1.0), (c, -1.0)], 0.0));
+                rows.push((
+                    vec![(xvar(t0, local(mesh, t0, v), other), 1.0), (c, -1.0)],
+                    0.0,
+                ));
             }
         }
     }
+    (names, rows)
+}
+
+/// Eliminates the constraints `rows` over the `base` continuous and `names.len()` integer
+/// unknowns; a contradiction names the constraint.
+fn eliminate(rows: &[Row], base: u32, names: &[IntegerVar]) -> Result<Elim, ParamError> {
     let nvar = (base as usize) + names.len();
     let mut integer = vec![false; nvar];
     integer[base as usize..].fill(true);
     let mut elim = Elim::new(integer);
-    for (row, rhs) in &rows {
+    for (row, rhs) in rows {
         elim.add(row, *rhs).map_err(|c| {
             ParamError::Inconsistent(format!(
                 "a constraint on {} (residual {c})",
-                describe_row(row, base, &names)
+                describe_row(row, base, names)
             ))
         })?;
     }
+    Ok(elim)
+}
 
-    // Local energies.
+/// What the energy `Σ_t vol_t |∇x_t − T_t/s|²` of each tetrahedron reads: its barycentric
+/// gradients, its target gradients in its aligned chart over the scale, its volume.
+struct LocalEnergies {
+    grads: Vec<[[f64; 3]; 4]>,
+    targets: Vec<Frame>,
+    volumes: Vec<f64>,
+    total_volume: f64,
+}
+
+impl LocalEnergies {
+    /// The energy of the map of `values` (corners by `corner_cv`) over the total volume.
+    fn mean(&self, corner_cv: &[u32], values: &[f64]) -> f64 {
+        energy(
+            &corner_params(corner_cv, values),
+            &self.grads,
+            &self.targets,
+            &self.volumes,
+        ) / self.total_volume
+    }
+}
+
+/// The local energies of the tetrahedra (module docs, "Unknowns and energy").
+fn local_energies(
+    mesh: &TetMesh,
+    field: &Field<'_>,
+    cut: &Cut,
+    params: &ParamParams,
+) -> LocalEnergies {
+    let nt = mesh.tets.len();
     let grads: Vec<[[f64; 3]; 4]> = (0..nt).map(|t| gradients(&mesh.corners(t))).collect();
     let targets: Vec<Frame> = (0..nt)
         .map(|t| {
@@ -791,16 +894,81 @@ pub fn parameterise_with(
         .collect();
     let volumes: Vec<f64> = (0..nt).map(|t| mesh.volume(t)).collect();
     let total_volume: f64 = volumes.iter().sum();
+    LocalEnergies {
+        grads,
+        targets,
+        volumes,
+        total_volume,
+    }
+}
 
-    let mut last_fixed: Vec<(String, i64)> = Vec::new();
-    let mut prev_flipped = usize::MAX;
-    let flipped_of = |values: &[f64]| -> Vec<u32> {
-        let uvw = corner_params(&corner_cv, values);
-        (0..nt as u32)
+/// The unknowns the elimination leaves free, their normal equations factored, and every
+/// unknown's expression in them: one solve of the rounding.
+struct FreeSolve {
+    /// The free unknowns, ascending.
+    free: Vec<u32>,
+    /// Per unknown, its index in `free` (`u32::MAX` when eliminated).
+    index: Vec<u32>,
+    /// Per free unknown, its vertex's position (NaN for an integer unknown).
+    points: Vec<[f64; 3]>,
+    fac: Factored,
+    exprs: Vec<Expr>,
+}
+
+impl FreeSolve {
+    /// Every unknown's value when the free ones are `z`.
+    fn eval(&self, z: &[f64]) -> Vec<f64> {
+        self.exprs
+            .iter()
+            .map(|e| {
+                e.constant
+                    + e.terms
+                        .iter()
+                        .map(|&(f, c)| c * z[self.index[f as usize] as usize])
+                        .sum::<f64>()
+            })
+            .collect()
+    }
+}
+
+/// The greedy rounding of the integer unknowns (§3.1) and the untangling after it, over the
+/// constraints eliminated so far.
+struct Rounder<'a> {
+    params: &'a ParamParams,
+    names: &'a [IntegerVar],
+    /// The first integer unknown (the continuous ones come first).
+    base: u32,
+    /// All unknowns.
+    nvar: usize,
+    cv: &'a CutVertices,
+    local: &'a LocalEnergies,
+}
+
+impl Rounder<'_> {
+    /// The tetrahedra with non-positive parameter volume in the map of `values`.
+    fn flipped_of(&self, values: &[f64]) -> Vec<u32> {
+        let uvw = corner_params(&self.cv.corner_cv, values);
+        (0..uvw.len() as u32)
             .filter(|&t| param_volume(&uvw[t as usize]) <= 0.0)
             .collect()
-    };
-    let values = loop {
+    }
+
+    /// The normal equations over the unknowns `st` leaves free.
+    fn system<'s>(&'s self, elim: &'s Elim, st: &'s FreeSolve) -> System<'s> {
+        System {
+            points: &st.points,
+            elim,
+            index: &st.index,
+            corner_cv: &self.cv.corner_cv,
+            grads: &self.local.grads,
+            targets: &self.local.targets,
+            volumes: &self.local.volumes,
+        }
+    }
+
+    /// Factors and solves the normal equations over the unknowns `elim` leaves free.
+    fn solve(&self, elim: &Elim) -> Result<FreeSolve, ParamError> {
+        let nvar = self.nvar;
         let free: Vec<u32> = (0..nvar as u32)
             .filter(|&v| elim.expr[v as usize].is_none())
             .collect();
@@ -811,8 +979,8 @@ pub fn parameterise_with(
         let points: Vec<[f64; 3]> = free
             .iter()
             .map(|&v| {
-                if v < base {
-                    cv_pos[(v / 3) as usize]
+                if v < self.base {
+                    self.cv.pos[(v / 3) as usize]
                 } else {
                     [f64::NAN; 3]
                 }
@@ -820,147 +988,186 @@ pub fn parameterise_with(
             .collect();
         let sys = System {
             points: &points,
-            elim: &elim,
+            elim,
             index: &index,
-            corner_cv: &corner_cv,
-            grads: &grads,
-            targets: &targets,
-            volumes: &volumes,
+            corner_cv: &self.cv.corner_cv,
+            grads: &self.local.grads,
+            targets: &self.local.targets,
+            volumes: &self.local.volumes,
         };
         let fac = sys.factor(free.len()).map_err(ParamError::Solve)?;
-        if report.rounds == 0 {
-            report.unknowns = free.len();
-            report.integer_unknowns = free.iter().filter(|&&v| elim.integer[v as usize]).count();
-            report.matrix_nonzeros = fac.nnz;
-        }
         let exprs: Vec<Expr> = (0..nvar as u32).map(|v| elim.of(v)).collect();
-        let eval = |z: &[f64]| -> Vec<f64> {
-            exprs
+        Ok(FreeSolve {
+            free,
+            index,
+            points,
+            fac,
+            exprs,
+        })
+    }
+
+    /// The map of the final free unknowns `z`, its flips and energy recorded.
+    fn finish(&self, st: &FreeSolve, z: &[f64], report: &mut ParamReport) -> Vec<f64> {
+        let values = st.eval(z);
+        report.flipped_final = self.flipped_of(&values).len();
+        report.energy_final = self.local.mean(&self.cv.corner_cv, &values);
+        values
+    }
+
+    /// Rounds the integer unknowns and untangles the map (module docs): solve, record the
+    /// flips, fix a batch, until few enough are open to fix one at a time on the last
+    /// factorisation. Returns every unknown's value.
+    fn run(&self, elim: &mut Elim, report: &mut ParamReport) -> Result<Vec<f64>, ParamError> {
+        let params = self.params;
+        let mut last_fixed: Vec<(String, i64)> = Vec::new();
+        let mut prev_flipped = usize::MAX;
+        loop {
+            let st = self.solve(elim)?;
+            if report.rounds == 0 {
+                report.unknowns = st.free.len();
+                report.integer_unknowns = st
+                    .free
+                    .iter()
+                    .filter(|&&v| elim.integer[v as usize])
+                    .count();
+                report.matrix_nonzeros = st.fac.nnz;
+            }
+            let values = st.eval(&st.fac.x0);
+            let flipped = self.flipped_of(&values);
+            let e = self.local.mean(&self.cv.corner_cv, &values);
+            if report.rounds == 0 {
+                report.flipped_continuous = flipped.len();
+                report.energy_continuous = e;
+            } else if flipped.len() > prev_flipped && report.first_flip.is_none() {
+                report.first_flip = Some(FlipCause {
+                    round: report.rounds,
+                    fixed: std::mem::take(&mut last_fixed),
+                    tets: flipped.iter().copied().take(16).collect(),
+                });
+            }
+            prev_flipped = flipped.len();
+            report.flipped_final = flipped.len();
+            report.energy_final = e;
+            // The open integer unknowns, as indices into the free list.
+            let open: Vec<u32> = st
+                .free
                 .iter()
-                .map(|e| {
-                    e.constant
-                        + e.terms
-                            .iter()
-                            .map(|&(f, c)| c * z[index[f as usize] as usize])
-                            .sum::<f64>()
-                })
-                .collect()
-        };
-        // The map of the final unknowns `z`, its flips and energy recorded.
-        let finish = |z: &[f64], report: &mut ParamReport| -> Vec<f64> {
-            let values = eval(z);
-            report.flipped_final = flipped_of(&values).len();
-            report.energy_final = energy(
-                &corner_params(&corner_cv, &values),
-                &grads,
-                &targets,
-                &volumes,
-            ) / total_volume;
-            values
-        };
-        let values = eval(&fac.x0);
-        let flipped = flipped_of(&values);
-        let e = energy(
-            &corner_params(&corner_cv, &values),
-            &grads,
-            &targets,
-            &volumes,
-        ) / total_volume;
-        if report.rounds == 0 {
-            report.flipped_continuous = flipped.len();
-            report.energy_continuous = e;
-        } else if flipped.len() > prev_flipped && report.first_flip.is_none() {
-            report.first_flip = Some(FlipCause {
-                round: report.rounds,
-                fixed: std::mem::take(&mut last_fixed),
-                tets: flipped.iter().copied().take(16).collect(),
-            });
-        }
-        prev_flipped = flipped.len();
-        report.flipped_final = flipped.len();
-        report.energy_final = e;
-        // The open integer unknowns, as indices into the free list.
-        let open: Vec<u32> = free
-            .iter()
-            .enumerate()
-            .filter(|&(_, &v)| elim.integer[v as usize])
-            .map(|(k, _)| k as u32)
-            .collect();
-        if !params.round {
-            break values;
-        }
-        if open.is_empty() {
-            if flipped.is_empty() || !params.untangle {
-                break values;
+                .enumerate()
+                .filter(|&(_, &v)| elim.integer[v as usize])
+                .map(|(k, _)| k as u32)
+                .collect();
+            if !params.round {
+                return Ok(values);
             }
-            let mut z = fac.x0.clone();
-            let movable = vec![true; z.len()];
-            report.untangle = Some(sys.untangle(&exprs, ncv as usize, &mut z, &movable));
-            break finish(&z, &mut report);
-        }
-        if open.len() <= params.one_at_a_time {
-            // Greedy rounding (§3.1) one unknown at a time, closest to an integer first, on
-            // this one factorisation; an unknown whose nearest integer would flip more
-            // tetrahedra takes the integer on its other side when that flips fewer.
-            let r = Rounding::new(&fac, open.clone());
-            let singular =
-                || ParamError::Solve("the rounding's Schur complement is singular".into());
-            let mut fixed: Vec<(usize, f64)> = Vec::new();
-            let mut mu: Vec<f64> = Vec::new();
-            let mut done = vec![false; open.len()];
-            let mut flips_now = flipped.len();
-            for _ in 0..open.len() {
-                let off = |x: f64| (x - x.round()).abs();
-                let (k, x) = (0..open.len())
-                    .filter(|&k| !done[k])
-                    .map(|k| (k, r.value(&fixed, &mu, open[k])))
-                    .min_by(|a, b| off(a.1).total_cmp(&off(b.1)).then(a.0.cmp(&b.0)))
-                    .expect("an open unknown is left");
-                let near = x.round();
-                let far = if x >= near { near + 1.0 } else { near - 1.0 };
-                let attempt = |value: f64| -> Result<(Vec<u32>, Fixed), ParamError> {
-                    let mut with = fixed.clone();
-                    with.push((k, value));
-                    let z = r.solution(&with).ok_or_else(singular)?;
-                    Ok((flipped_of(&eval(&z)), with))
-                };
-                let mut pick = attempt(near)?;
-                let mut chosen = near;
-                if pick.0.len() > flips_now {
-                    let other = attempt(far)?;
-                    if other.0.len() < pick.0.len() {
-                        (pick, chosen) = (other, far);
-                        report.redirected += 1;
-                    }
+            if open.is_empty() {
+                if flipped.is_empty() || !params.untangle {
+                    return Ok(values);
                 }
-                report.rounds += 1;
-                report.max_rounding = report.max_rounding.max((x - chosen).abs());
-                if pick.0.len() > flips_now && report.first_flip.is_none() {
-                    let name = names[(free[open[k] as usize] - base) as usize];
-                    report.first_flip = Some(FlipCause {
-                        round: report.rounds,
-                        fixed: vec![(name.to_string(), chosen as i64)],
-                        tets: pick.0.iter().copied().take(16).collect(),
-                    });
-                }
-                flips_now = pick.0.len();
-                fixed = pick.1;
-                mu = r.multipliers(&fixed).ok_or_else(singular)?;
-                done[k] = true;
+                let mut z = st.fac.x0.clone();
+                let movable = vec![true; z.len()];
+                let ncv = self.cv.count as usize;
+                report.untangle = Some(
+                    self.system(elim, &st)
+                        .untangle(&st.exprs, ncv, &mut z, &movable),
+                );
+                return Ok(self.finish(&st, &z, report));
             }
-            let mut z = r.solution(&fixed).ok_or_else(singular)?;
-            if flips_now > 0 && params.untangle {
-                let movable: Vec<bool> = free.iter().map(|&v| !elim.integer[v as usize]).collect();
-                report.untangle = Some(sys.untangle(&exprs, ncv as usize, &mut z, &movable));
+            if open.len() <= params.one_at_a_time {
+                return self.one_at_a_time(elim, &st, open, flipped.len(), report);
             }
-            break finish(&z, &mut report);
+            self.fix_batch(elim, &st, &open, &values, &mut last_fixed, report)?;
         }
-        // Batched greedy rounding (§3.1), closest to an integer first, a factorisation per
-        // round, until few enough are open for the one-at-a-time rounding above.
+    }
+
+    /// Greedy rounding (§3.1) one unknown at a time, closest to an integer first, on the one
+    /// factorisation of `st`; an unknown whose nearest integer would flip more tetrahedra
+    /// takes the integer on its other side when that flips fewer. `flipped`: the tetrahedra
+    /// flipped before. Untangles what stays flipped; returns every unknown's value.
+    fn one_at_a_time(
+        &self,
+        elim: &Elim,
+        st: &FreeSolve,
+        open: Vec<u32>,
+        flipped: usize,
+        report: &mut ParamReport,
+    ) -> Result<Vec<f64>, ParamError> {
+        let (params, names, base) = (self.params, self.names, self.base);
+        let free = &st.free;
+        let r = Rounding::new(&st.fac, open.clone());
+        let singular = || ParamError::Solve("the rounding's Schur complement is singular".into());
+        let mut fixed: Vec<(usize, f64)> = Vec::new();
+        let mut mu: Vec<f64> = Vec::new();
+        let mut done = vec![false; open.len()];
+        let mut flips_now = flipped;
+        for _ in 0..open.len() {
+            let off = |x: f64| (x - x.round()).abs();
+            let (k, x) = (0..open.len())
+                .filter(|&k| !done[k])
+                .map(|k| (k, r.value(&fixed, &mu, open[k])))
+                .min_by(|a, b| off(a.1).total_cmp(&off(b.1)).then(a.0.cmp(&b.0)))
+                .expect("an open unknown is left");
+            let near = x.round();
+            let far = if x >= near { near + 1.0 } else { near - 1.0 };
+            let attempt = |value: f64| -> Result<(Vec<u32>, Fixed), ParamError> {
+                let mut with = fixed.clone();
+                with.push((k, value));
+                let z = r.solution(&with).ok_or_else(singular)?;
+                Ok((self.flipped_of(&st.eval(&z)), with))
+            };
+            let mut pick = attempt(near)?;
+            let mut chosen = near;
+            if pick.0.len() > flips_now {
+                let other = attempt(far)?;
+                if other.0.len() < pick.0.len() {
+                    (pick, chosen) = (other, far);
+                    report.redirected += 1;
+                }
+            }
+            report.rounds += 1;
+            report.max_rounding = report.max_rounding.max((x - chosen).abs());
+            if pick.0.len() > flips_now && report.first_flip.is_none() {
+                let name = names[(free[open[k] as usize] - base) as usize];
+                report.first_flip = Some(FlipCause {
+                    round: report.rounds,
+                    fixed: vec![(name.to_string(), chosen as i64)],
+                    tets: pick.0.iter().copied().take(16).collect(),
+                });
+            }
+            flips_now = pick.0.len();
+            fixed = pick.1;
+            mu = r.multipliers(&fixed).ok_or_else(singular)?;
+            done[k] = true;
+        }
+        let mut z = r.solution(&fixed).ok_or_else(singular)?;
+        if flips_now > 0 && params.untangle {
+            let movable: Vec<bool> = free.iter().map(|&v| !elim.integer[v as usize]).collect();
+            let ncv = self.cv.count as usize;
+            report.untangle = Some(
+                self.system(elim, st)
+                    .untangle(&st.exprs, ncv, &mut z, &movable),
+            );
+        }
+        Ok(self.finish(st, &z, report))
+    }
+
+    /// One round of the batched greedy rounding (§3.1): of the `open` unknowns (indices into
+    /// `st`'s free list, at `values`), the share [`ParamParams::batch`] closest to an integer
+    /// is fixed, leaving at least [`ParamParams::one_at_a_time`] (and one) open; what it
+    /// fixed is kept in `last_fixed` for the report.
+    fn fix_batch(
+        &self,
+        elim: &mut Elim,
+        st: &FreeSolve,
+        open: &[u32],
+        values: &[f64],
+        last_fixed: &mut Vec<(String, i64)>,
+        report: &mut ParamReport,
+    ) -> Result<(), ParamError> {
+        let params = self.params;
         let mut order: Vec<(f64, u32)> = open
             .iter()
             .map(|&k| {
-                let v = free[k as usize];
+                let v = st.free[k as usize];
                 let x = values[v as usize];
                 ((x - x.round()).abs(), v)
             })
@@ -973,7 +1180,7 @@ pub fn parameterise_with(
         for &(d, v) in &order[..take] {
             let k = values[v as usize].round();
             report.max_rounding = report.max_rounding.max(d);
-            let name = names[(v - base) as usize];
+            let name = self.names[(v - self.base) as usize];
             elim.add(&[(v, 1.0)], k).map_err(|c| {
                 ParamError::Inconsistent(format!("rounding {name} to {k} (residual {c})"))
             })?;
@@ -982,10 +1189,22 @@ pub fn parameterise_with(
             }
         }
         report.rounds += 1;
-    };
+        Ok(())
+    }
+}
 
-    // The map: corner parameters and transitions between aligned charts.
-    let uvw = corner_params(&corner_cv, &values);
+/// The map: corner parameters and transitions between aligned charts, each cut face's shift
+/// read off the parameters of one of its vertices on both sides.
+fn grid_map(
+    mesh: &TetMesh,
+    topo: &Topology,
+    cut: &Cut,
+    corner_cv: &[u32],
+    values: &[f64],
+) -> GridMap {
+    let nt = mesh.tets.len();
+    let nb = &topo.neighbours;
+    let uvw = corner_params(corner_cv, values);
     let transitions: Vec<[Transition; 4]> = (0..nt)
         .map(|t| {
             std::array::from_fn(|i| {
@@ -996,7 +1215,7 @@ pub fn parameterise_with(
                 let s = s as usize;
                 let rot = cut.aligned[t][i];
                 let j = FACE_OPPOSITE[i][0];
-                let js = local(s, mesh.tets[t][j]);
+                let js = local(mesh, s, mesh.tets[t][j]);
                 let there = uvw[s][js];
                 let here = rot.apply(uvw[t][j]);
                 Transition {
@@ -1006,7 +1225,7 @@ pub fn parameterise_with(
             })
         })
         .collect();
-    Ok((GridMap { uvw, transitions }, report))
+    GridMap { uvw, transitions }
 }
 
 /// A frame's axes in an aligned chart: row `r` of `R F`.
