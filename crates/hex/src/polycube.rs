@@ -240,10 +240,11 @@ fn axis(l: u8) -> Vector3<f64> {
     a
 }
 
-/// Deformation state: positions and per-tetrahedron gradients.
+/// Deformation state: the input mesh, its per-tetrahedron gradients and volumes.
 struct Deformation<'a> {
     mesh: &'a TetMesh,
     grads: Vec<[Vector3<f64>; 4]>,
+    volumes: Vec<f64>,
 }
 
 impl Deformation<'_> {
@@ -253,6 +254,47 @@ impl Deformation<'_> {
             j += Vector3::from(y[v as usize]) * self.grads[t][k].transpose();
         }
         j
+    }
+
+    /// The vertex pinned in `K`.
+    fn pinned(&self) -> usize {
+        self.mesh.tets[0][0] as usize
+    }
+
+    /// `K = Σ w V Gᵀ G` for the weights `stiffness`, one vertex pinned; a tiny shift keeps
+    /// unused vertices at rest. Returns the factor and the mean diagonal (the pin's weight).
+    fn factor_k(&self, stiffness: &[f64]) -> Result<(CholeskyFactor, f64), PolycubeError> {
+        let mesh = self.mesh;
+        let (nt, nv) = (mesh.tets.len(), mesh.verts.len());
+        let pinned = self.pinned();
+        let mut k = Triplets::new(nv);
+        let mut trace = 0.0;
+        for t in 0..nt {
+            let tet = mesh.tets[t];
+            for a in 0..4 {
+                for b in 0..4 {
+                    let (va, vb) = (tet[a] as usize, tet[b] as usize);
+                    if vb <= va {
+                        let h = stiffness[t]
+                            * self.volumes[t]
+                            * self.grads[t][a].dot(&self.grads[t][b]);
+                        k.push(va, vb, h);
+                        if va == vb {
+                            trace += h;
+                        }
+                    }
+                }
+            }
+        }
+        let mean = trace / nv.max(1) as f64;
+        for v in 0..nv {
+            k.push(v, v, 1e-10 * mean);
+        }
+        k.push(pinned, pinned, mean);
+        Ok((
+            CholeskyFactor::new(&mut k).map_err(PolycubeError::Solve)?,
+            mean,
+        ))
     }
 }
 
@@ -624,54 +666,102 @@ pub fn polycube_frames(
     params: &PolycubeParams,
 ) -> Result<Polycube, PolycubeError> {
     let nt = mesh.tets.len();
-    let nv = mesh.verts.len();
     let grads: Vec<[Vector3<f64>; 4]> = (0..nt)
         .map(|t| gradients(&mesh.corners(t)).map(Vector3::from))
         .collect();
     let volumes: Vec<f64> = (0..nt).map(|t| mesh.volume(t)).collect();
-    let def = Deformation { mesh, grads };
-
-    // K = Σ w V Gᵀ G, one vertex pinned; a tiny shift keeps unused vertices at rest.
-    let pinned = mesh.tets[0][0] as usize;
-    let mut stiffness = vec![1.0; nt];
-    let factor_k = |stiffness: &[f64]| -> Result<(CholeskyFactor, f64), PolycubeError> {
-        let mut k = Triplets::new(nv);
-        let mut trace = 0.0;
-        for t in 0..nt {
-            let tet = mesh.tets[t];
-            for a in 0..4 {
-                for b in 0..4 {
-                    let (va, vb) = (tet[a] as usize, tet[b] as usize);
-                    if vb <= va {
-                        let h = stiffness[t] * volumes[t] * def.grads[t][a].dot(&def.grads[t][b]);
-                        k.push(va, vb, h);
-                        if va == vb {
-                            trace += h;
-                        }
-                    }
-                }
-            }
-        }
-        let mean = trace / nv.max(1) as f64;
-        for v in 0..nv {
-            k.push(v, v, 1e-10 * mean);
-        }
-        k.push(pinned, pinned, mean);
-        Ok((
-            CholeskyFactor::new(&mut k).map_err(PolycubeError::Solve)?,
-            mean,
-        ))
+    let def = Deformation {
+        mesh,
+        grads,
+        volumes,
+    };
+    let stiffness = vec![1.0; nt];
+    let weights = boundary_weights(mesh, topo, params);
+    let mut l = rotation_laplacian(topo, &weights);
+    let centroids: Vec<[f64; 3]> = (0..nt)
+        .map(|t| {
+            let c = mesh.corners(t);
+            [0, 1, 2].map(|k| (c[0][k] + c[1][k] + c[2][k] + c[3][k]) / 4.0)
+        })
+        .collect();
+    // The two factorisations are independent: side by side.
+    let (kf, lf) = rayon::join(
+        || def.factor_k(&stiffness),
+        || CholeskyFactor::with_points(&mut l, &centroids).map_err(PolycubeError::Solve),
+    );
+    let ((kf, mean), lf) = (kf?, lf?);
+    let mut k = Stiffness {
+        w: stiffness,
+        kf,
+        mean,
+    };
+    let d = Deformer {
+        def,
+        topo,
+        weights,
+        lf,
+        params,
     };
 
-    // L: graph Laplacian of the tetrahedra plus the boundary weights.
+    let mut y = mesh.verts.clone();
+    let (start, _) = deviation(mesh, topo, &y, None);
+    let mut report = PolycubeReport {
+        mean_deviation_start: start,
+        mean_deviation: start,
+        ..PolycubeReport::default()
+    };
+    let mut best = (start, y.clone());
+    let mut fixed: Option<Vec<u8>> = None;
+    report.second_phase_from = usize::MAX;
+    let mut limit = params.iterations;
+    // First towards the nearest axes, then (second phase) towards the cleaned-up labels.
+    loop {
+        d.phase(
+            &mut k,
+            &mut y,
+            &mut best,
+            fixed.as_deref(),
+            limit,
+            &mut report,
+        )?;
+        if fixed.is_some() || params.label_iterations == 0 {
+            break;
+        }
+        let l = clean_labels(mesh, topo, &best.1);
+        let (dev, _) = deviation(mesh, topo, &best.1, Some(&l));
+        fixed = Some(l);
+        report.mean_deviation = dev;
+        best.0 = dev;
+        if dev <= params.tolerance_degrees {
+            break;
+        }
+        y = best.1.clone();
+        report.second_phase_from = report.iterations;
+        limit = report.iterations + params.label_iterations;
+    }
+    if report.second_phase_from == usize::MAX {
+        report.second_phase_from = report.iterations;
+    }
+    Ok(read_off(&d.def, topo, best.1, fixed, report))
+}
+
+/// The weights `λ A_f / Ā` of the boundary targets (module docs, step 2): each boundary
+/// triangle's input area over their mean.
+fn boundary_weights(mesh: &TetMesh, topo: &Topology, params: &PolycubeParams) -> Vec<f64> {
     let areas: Vec<f64> = (0..topo.boundary.len())
         .map(|f| boundary_face(mesh, topo, &mesh.verts, f).1)
         .collect();
     let mean_area = areas.iter().sum::<f64>() / areas.len().max(1) as f64;
-    let weights: Vec<f64> = areas
+    areas
         .iter()
         .map(|a| params.boundary_weight * a / mean_area.max(f64::MIN_POSITIVE))
-        .collect();
+        .collect()
+}
+
+/// `L`: the graph Laplacian of the tetrahedra across faces plus the boundary `weights` (and
+/// a tiny shift on the diagonal), the matrix of step 2.
+fn rotation_laplacian(topo: &Topology, weights: &[f64]) -> Triplets {
+    let nt = topo.neighbours.len();
     let mut l = Triplets::new(nt);
     for t in 0..nt {
         for &s in &topo.neighbours[t] {
@@ -686,128 +776,54 @@ pub fn polycube_frames(
     for (f, &(t, _)) in topo.boundary.iter().enumerate() {
         l.push(t as usize, t as usize, weights[f]);
     }
-    let centroids: Vec<[f64; 3]> = (0..nt)
-        .map(|t| {
-            let c = mesh.corners(t);
-            [0, 1, 2].map(|k| (c[0][k] + c[1][k] + c[2][k] + c[3][k]) / 4.0)
-        })
-        .collect();
-    // The two factorisations are independent: side by side.
-    let (kf, lf) = rayon::join(
-        || factor_k(&stiffness),
-        || CholeskyFactor::with_points(&mut l, &centroids).map_err(PolycubeError::Solve),
-    );
-    let ((mut kf, mut mean), lf) = (kf?, lf?);
+    l
+}
 
-    let mut y = mesh.verts.clone();
-    let (start, _) = deviation(mesh, topo, &y, None);
-    let mut report = PolycubeReport {
-        mean_deviation_start: start,
-        mean_deviation: start,
-        ..PolycubeReport::default()
-    };
-    let mut best = (start, y.clone());
-    let mut stale = 0;
-    let mut fixed: Option<Vec<u8>> = None;
-    report.second_phase_from = usize::MAX;
-    let mut limit = params.iterations;
-    // First towards the nearest axes, then (second phase) towards the cleaned-up labels.
-    loop {
-        while report.iterations < limit && report.mean_deviation > params.tolerance_degrees {
-            // 1–2: boundary targets, spread over the tetrahedra.
-            let mut rhs = vec![[0.0; 3]; nt];
-            for (f, &(t, _)) in topo.boundary.iter().enumerate() {
-                let (n, _) = boundary_face(mesh, topo, &y, f);
-                let a = match &fixed {
-                    Some(l) => axis(l[f]),
-                    None => label(&n).1,
-                };
-                let axis = n.cross(&a);
-                let s = axis.norm();
-                if s > 1e-12 {
-                    let rho = axis * (s.atan2(n.dot(&a)) / s);
-                    for d in 0..3 {
-                        rhs[t as usize][d] += weights[f] * rho[d];
-                    }
-                }
-            }
-            let r: Vec<Vector3<f64>> = lf.solve(&rhs).into_iter().map(Vector3::from).collect();
-            // 3: rigid targets, solved for positions. A tetrahedron that blocks every step
-            // (it would turn inside out) is stiffened and the positions solved again.
-            let targets: Vec<Matrix3<f64>> = (0..nt)
-                .into_par_iter()
-                .map(|t| {
-                    let turn = Rotation3::new(r[t]).into_inner();
-                    turn * clamp_stretch(&def.jacobian(&y, t), STRETCH)
-                })
-                .collect();
-            let flipped_now: Vec<bool> = (0..nt)
-                .into_par_iter()
-                .map(|t| def.jacobian(&y, t).determinant() <= 0.0)
-                .collect();
-            let mut next = None;
-            for _ in 0..=STIFFEN_ROUNDS {
-                let pulls: Vec<[Vector3<f64>; 4]> = (0..nt)
-                    .into_par_iter()
-                    .map(|t| def.grads[t].map(|g| targets[t] * g * (stiffness[t] * volumes[t])))
-                    .collect();
-                let mut b = vec![[0.0; 3]; nv];
-                for (tet, pull) in mesh.tets.iter().zip(&pulls) {
-                    for (&v, qg) in tet.iter().zip(pull) {
-                        for d in 0..3 {
-                            b[v as usize][d] += qg[d];
-                        }
-                    }
-                }
-                for d in 0..3 {
-                    b[pinned][d] += mean * y[pinned][d];
-                }
-                let target = kf.solve(&b);
-                // Step towards the solve's positions, halving the step while a tetrahedron would
-                // turn inside out (a tetrahedron already flipped does not count).
-                let mut step = 1.0;
-                let blocking = loop {
-                    let cand: Vec<[f64; 3]> = y
-                        .par_iter()
-                        .zip(&target)
-                        .map(|(a, b)| std::array::from_fn(|d| a[d] + step * (b[d] - a[d])))
-                        .collect();
-                    let bad: Vec<usize> = (0..nt)
-                        .into_par_iter()
-                        .filter(|&t| !flipped_now[t] && def.jacobian(&cand, t).determinant() <= 0.0)
-                        .collect();
-                    if bad.is_empty() {
-                        next = Some(cand);
-                        break bad;
-                    }
-                    if step <= MIN_STEP {
-                        break bad;
-                    }
-                    step *= 0.5;
-                };
-                if next.is_some() {
-                    break;
-                }
-                for t in blocking {
-                    stiffness[t] *= STIFFEN;
-                    for &s in &topo.neighbours[t] {
-                        if s != NO_TET {
-                            stiffness[s as usize] *= STIFFEN.sqrt();
-                        }
-                    }
-                }
-                report.stiffened += 1;
-                (kf, mean) = factor_k(&stiffness)?;
-            }
-            let Some(next) = next else {
+/// The stiffness of step 3: the weights `w_t` and the factor of `K` for them, with its mean
+/// diagonal (the weight pinning one vertex).
+struct Stiffness {
+    w: Vec<f64>,
+    kf: CholeskyFactor,
+    mean: f64,
+}
+
+/// What the deformation iterations share: the mesh's deformation state, the boundary
+/// targets' weights and the factored Laplacian `L` of step 2.
+struct Deformer<'a> {
+    def: Deformation<'a>,
+    topo: &'a Topology,
+    weights: Vec<f64>,
+    lf: CholeskyFactor,
+    params: &'a PolycubeParams,
+}
+
+impl Deformer<'_> {
+    /// One phase of the deformation (module docs): iterations from `y` until `limit` are
+    /// run, the mean deviation from the axes (of the labels `fixed`, else the nearest) is
+    /// below the tolerance, it has not fallen for ten iterations, or no step keeps every
+    /// tetrahedron positive. `best` keeps the least deviation and its positions.
+    fn phase(
+        &self,
+        k: &mut Stiffness,
+        y: &mut Vec<[f64; 3]>,
+        best: &mut (f64, Vec<[f64; 3]>),
+        fixed: Option<&[u8]>,
+        limit: usize,
+        report: &mut PolycubeReport,
+    ) -> Result<(), PolycubeError> {
+        let (mesh, topo) = (self.def.mesh, self.topo);
+        let mut stale = 0;
+        while report.iterations < limit && report.mean_deviation > self.params.tolerance_degrees {
+            let r = self.rotations(y, fixed);
+            let Some(next) = self.deform(y, &r, k, report)? else {
                 break;
             };
-            y = next;
+            *y = next;
             report.iterations += 1;
-            let (dev, _) = deviation(mesh, topo, &y, fixed.as_deref());
+            let (dev, _) = deviation(mesh, topo, y, fixed);
             report.mean_deviation = dev;
             if dev < best.0 - 1e-3 {
-                best = (dev, y.clone());
+                *best = (dev, y.clone());
                 stale = 0;
             } else {
                 stale += 1;
@@ -816,26 +832,137 @@ pub fn polycube_frames(
                 }
             }
         }
-        if fixed.is_some() || params.label_iterations == 0 {
-            break;
-        }
-        let l = clean_labels(mesh, topo, &best.1);
-        let (dev, _) = deviation(mesh, topo, &best.1, Some(&l));
-        fixed = Some(l);
-        report.mean_deviation = dev;
-        best.0 = dev;
-        if dev <= params.tolerance_degrees {
-            break;
-        }
-        y = best.1.clone();
-        stale = 0;
-        report.second_phase_from = report.iterations;
-        limit = report.iterations + params.label_iterations;
+        Ok(())
     }
-    if report.second_phase_from == usize::MAX {
-        report.second_phase_from = report.iterations;
+
+    /// Steps 1–2: each boundary triangle's target rotation towards its axis (its `fixed`
+    /// label's, else the nearest), spread over the tetrahedra by `L`.
+    fn rotations(&self, y: &[[f64; 3]], fixed: Option<&[u8]>) -> Vec<Vector3<f64>> {
+        let (mesh, topo) = (self.def.mesh, self.topo);
+        let mut rhs = vec![[0.0; 3]; mesh.tets.len()];
+        for (f, &(t, _)) in topo.boundary.iter().enumerate() {
+            let (n, _) = boundary_face(mesh, topo, y, f);
+            let a = match fixed {
+                Some(l) => axis(l[f]),
+                None => label(&n).1,
+            };
+            let axis = n.cross(&a);
+            let s = axis.norm();
+            if s > 1e-12 {
+                let rho = axis * (s.atan2(n.dot(&a)) / s);
+                for d in 0..3 {
+                    rhs[t as usize][d] += self.weights[f] * rho[d];
+                }
+            }
+        }
+        self.lf.solve(&rhs).into_iter().map(Vector3::from).collect()
     }
-    let y = best.1;
+
+    /// Step 3: rigid targets (the rotations `r` of the clamped gradients at `y`), solved for
+    /// positions. A tetrahedron that blocks every step (it would turn inside out) is
+    /// stiffened and the positions solved again, up to [`STIFFEN_ROUNDS`] times. Returns the
+    /// next positions, or `None` when no step keeps every tetrahedron positive.
+    fn deform(
+        &self,
+        y: &[[f64; 3]],
+        r: &[Vector3<f64>],
+        k: &mut Stiffness,
+        report: &mut PolycubeReport,
+    ) -> Result<Option<Vec<[f64; 3]>>, PolycubeError> {
+        let def = &self.def;
+        let mesh = def.mesh;
+        let (nt, nv) = (mesh.tets.len(), mesh.verts.len());
+        let pinned = def.pinned();
+        let targets: Vec<Matrix3<f64>> = (0..nt)
+            .into_par_iter()
+            .map(|t| {
+                let turn = Rotation3::new(r[t]).into_inner();
+                turn * clamp_stretch(&def.jacobian(y, t), STRETCH)
+            })
+            .collect();
+        let flipped_now: Vec<bool> = (0..nt)
+            .into_par_iter()
+            .map(|t| def.jacobian(y, t).determinant() <= 0.0)
+            .collect();
+        for _ in 0..=STIFFEN_ROUNDS {
+            let pulls: Vec<[Vector3<f64>; 4]> = (0..nt)
+                .into_par_iter()
+                .map(|t| def.grads[t].map(|g| targets[t] * g * (k.w[t] * def.volumes[t])))
+                .collect();
+            let mut b = vec![[0.0; 3]; nv];
+            for (tet, pull) in mesh.tets.iter().zip(&pulls) {
+                for (&v, qg) in tet.iter().zip(pull) {
+                    for d in 0..3 {
+                        b[v as usize][d] += qg[d];
+                    }
+                }
+            }
+            for d in 0..3 {
+                b[pinned][d] += k.mean * y[pinned][d];
+            }
+            let target = k.kf.solve(&b);
+            let blocking = match self.step_towards(y, &target, &flipped_now) {
+                Ok(next) => return Ok(Some(next)),
+                Err(blocking) => blocking,
+            };
+            for t in blocking {
+                k.w[t] *= STIFFEN;
+                for &s in &self.topo.neighbours[t] {
+                    if s != NO_TET {
+                        k.w[s as usize] *= STIFFEN.sqrt();
+                    }
+                }
+            }
+            report.stiffened += 1;
+            (k.kf, k.mean) = def.factor_k(&k.w)?;
+        }
+        Ok(None)
+    }
+
+    /// The step from `y` towards the solve's positions `target`, halved while a tetrahedron
+    /// would turn inside out (one already flipped, `flipped_now`, does not count). `Err`:
+    /// the tetrahedra that would still turn at a step of [`MIN_STEP`].
+    fn step_towards(
+        &self,
+        y: &[[f64; 3]],
+        target: &[[f64; 3]],
+        flipped_now: &[bool],
+    ) -> Result<Vec<[f64; 3]>, Vec<usize>> {
+        let def = &self.def;
+        let nt = def.mesh.tets.len();
+        let mut step = 1.0;
+        loop {
+            let cand: Vec<[f64; 3]> = y
+                .par_iter()
+                .zip(target)
+                .map(|(a, b)| std::array::from_fn(|d| a[d] + step * (b[d] - a[d])))
+                .collect();
+            let bad: Vec<usize> = (0..nt)
+                .into_par_iter()
+                .filter(|&t| !flipped_now[t] && def.jacobian(&cand, t).determinant() <= 0.0)
+                .collect();
+            if bad.is_empty() {
+                return Ok(cand);
+            }
+            if step <= MIN_STEP {
+                return Err(bad);
+            }
+            step *= 0.5;
+        }
+    }
+}
+
+/// The frames and gradients read off the final positions `y`, with the cleaned-up labels
+/// (those of the second phase, `fixed`, or cleaned up now) and the report completed.
+fn read_off(
+    def: &Deformation,
+    topo: &Topology,
+    y: Vec<[f64; 3]>,
+    fixed: Option<Vec<u8>>,
+    mut report: PolycubeReport,
+) -> Polycube {
+    let mesh = def.mesh;
+    let nt = mesh.tets.len();
     let (dev, within) = deviation(mesh, topo, &y, fixed.as_deref());
     report.mean_deviation = dev;
     report.aligned_fraction = within;
@@ -857,13 +984,13 @@ pub fn polycube_frames(
     for l in &labels {
         report.labels[*l as usize] += 1;
     }
-    Ok(Polycube {
+    Polycube {
         axes: labels.iter().map(|l| l / 2).collect(),
         frames,
         gradients,
         deformed: y,
         report,
-    })
+    }
 }
 
 #[cfg(test)]
