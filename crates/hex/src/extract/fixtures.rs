@@ -1,4 +1,6 @@
 use super::*;
+use crate::mesh::{FACE_OPPOSITE, NO_TET, tet_neighbours};
+use crate::param::Transition;
 use crate::rotation;
 
 /// The `n × n × n` grid of unit cubes scaled by `h`, each split into the 6 tetrahedra

@@ -1,5 +1,8 @@
+use super::chart::{context, half};
 use super::fixtures::*;
+use super::walk::WalkEnd;
 use super::*;
+use crate::mesh::{NO_TET, tet_neighbours};
 use crate::quality::hex_scaled_jacobian;
 use crate::rotation::Rot;
 use rand::{Rng, SeedableRng};

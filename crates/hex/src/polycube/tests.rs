@@ -1,8 +1,11 @@
+use super::deform::{STRETCH, clamp_stretch, sym_eigen_range};
+use super::labels::{remove_turns, triangle_graph};
 use super::*;
 use crate::frames::{matchings, singularities};
 use crate::param::{Field, ParamParams, param_volume, parameterise_with};
 use crate::rotation::Rot;
 use crate::topology::check_tets;
+use nalgebra::Rotation3;
 
 /// The grid box rotated by `r` about the origin.
 fn turned_box(r: &Matrix3<f64>) -> TetMesh {

@@ -1,5 +1,7 @@
+use super::cube::{CUBE, corners};
 use super::*;
 use crate::extract::{extract, fixtures};
+use crate::quality::hex_scaled_jacobian;
 use rand::{Rng, SeedableRng};
 
 /// The `n³` grid of cubes of side `1/n` on the unit box, vertex `(i, j, k)` at index

@@ -1,5 +1,10 @@
+use super::boundary::Axis;
+use super::sh::{
+    SH_SCALE, dist2_9, dot9, frame_about, project, rotate, sh_basis, sh_basis_grad, sh_jacobian,
+};
 use super::*;
-use crate::mesh::{tet_neighbours, tet_volume};
+use crate::geom::vec::{add, cross, dot, norm, scale, sub};
+use crate::mesh::{NO_TET, tet_neighbours, tet_volume};
 use rand::{Rng, SeedableRng};
 use std::collections::HashSet;
 

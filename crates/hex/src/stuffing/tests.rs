@@ -1,3 +1,4 @@
+use super::cut_points::root;
 use super::*;
 use crate::mesh::{NO_TET, tet_neighbours};
 use std::collections::HashMap;

@@ -1,5 +1,6 @@
+use super::stars::local;
 use super::*;
-use crate::mesh::tet_volume;
+use crate::mesh::{NO_TET, tet_volume};
 use std::collections::HashMap;
 
 fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {

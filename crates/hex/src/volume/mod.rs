@@ -19,7 +19,7 @@
 //!   the end of the file is taken for a cut one (a truncated file whose last number still
 //!   reads as a number) and is an error. Binary `.meshb` is refused.
 //! * `.msh`: gmsh MSH 4.1 (ASCII and binary, either endianness, data size 8) and MSH 2.x
-//!   (2.0 to 2.2, ASCII and binary) (`msh.rs`). `$MeshFormat`, `$Nodes` and `$Elements` are
+//!   (2.0 to 2.2, ASCII and binary) (`msh/`). `$MeshFormat`, `$Nodes` and `$Elements` are
 //!   read; every other section (`$Entities`, `$PhysicalNames`, `$NodeData`, ...) is skipped
 //!   to its `$End…` line. Node tags may be sparse: they are mapped to 0-based indices in file
 //!   order. Element types 4 (tetrahedron), 5 (hexahedron) and 2 (triangle) are kept, other
