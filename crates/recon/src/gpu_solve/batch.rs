@@ -1,6 +1,8 @@
-//! One batch on the device: the batch's index lists and weights, their upload, the plan of
-//! dispatches (the Poisson solve, the screening's start, one conjugate-gradient iteration),
-//! the submissions until every leaf has stopped, and the solutions read back.
+//! One batch on the device, in the steps [`Device::run`] takes: the batch's index lists and
+//! weights ([`Lists`]), their upload with the divergences ([`Device::upload`]), the plan of
+//! dispatches ([`Plan::batch`]) and its uniform blocks ([`Device::bind`]), the submissions
+//! until every leaf has stopped ([`Device::iterate`]), and the solutions read back
+//! ([`Device::read_solutions`]).
 
 use std::time::Instant;
 
@@ -9,8 +11,7 @@ use wgpu::BufferUsages as U;
 use super::device::{Buffers, Device, ensure, entry, mapped, read_back};
 use super::fft_radix;
 use super::kernels::{
-    DIV, DOT_NODES, Kernel, LP, Op, P, Params, Plan, R, SLOT_ACTIVE, SLOT_ITER, SLOT_PLP, SLOT_RZ,
-    SLOT_RZ0, SLOT_RZNEW, SLOTS, X, Z,
+    DIV, DOT_NODES, Op, Params, Plan, SLOT_ACTIVE, SLOT_ITER, SLOT_RZ, SLOT_RZ0, SLOTS, Shape,
 };
 use super::prep::Prepared;
 use crate::extract::gpu::adapter;
@@ -21,38 +22,31 @@ use crate::fft_solve::{
 /// Conjugate-gradient iterations sent in one submission, between reads of the leaves' flags.
 const ITERATIONS_PER_SUBMISSION: u32 = 2;
 
-impl Device {
-    /// Solve a batch; returns each leaf's solution and convergence, and where the time went.
-    pub(super) fn run(
-        &mut self,
-        leaves: Vec<&Prepared>,
-    ) -> std::result::Result<(Vec<Reply0>, Timing), String> {
-        let scopes = adapter::push_scopes(&self.device);
-        let out =
-            std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| self.run_inner(&leaves)));
-        let (errors, _) = adapter::pop_scopes(scopes, &self.trouble);
-        let out = match out {
-            Ok(r) => r,
-            Err(_) => Err("a panic inside wgpu".to_string()),
-        };
-        if !errors.is_empty() {
-            self.bufs = Buffers::default();
-            return Err(errors.join("; "));
-        }
-        out
-    }
+/// A batch's index lists (global: each leaf's base of `nn` nodes added) and its samples'
+/// weights, with where each list starts in `idx`.
+struct Lists {
+    idx: Vec<u32>,
+    sw: Vec<f32>,
+    /// Aggregates (samples) of the batch.
+    s_total: usize,
+    /// Touched nodes of the batch.
+    t_total: usize,
+    /// Per aggregate its 8 nodes.
+    s_node: usize,
+    /// Per leaf its first aggregate (one more than leaves).
+    s_leaf: usize,
+    /// The touched nodes.
+    t_node: usize,
+    /// Per touched node the start of its entries (one more than touched nodes).
+    t_start: usize,
+    /// The entries `8a + c`.
+    t_ent: usize,
+}
 
-    fn run_inner(
-        &mut self,
-        leaves: &[&Prepared],
-    ) -> std::result::Result<(Vec<Reply0>, Timing), String> {
-        let t_begin = Instant::now();
-        let n = self.n;
-        let nn = n * n * n;
+impl Lists {
+    /// The lists of `leaves`, of `nn` nodes each, in the order the device reads them.
+    fn new(leaves: &[&Prepared], nn: usize) -> Lists {
         let b = leaves.len();
-        let stride = (self.max_batch * nn) as u32;
-        let dev = self.device.clone();
-        // The batch's index lists (global: leaf base added) and weights.
         let s_total: usize = leaves.iter().map(|l| l.nodes.len()).sum();
         let t_total: usize = leaves.iter().map(|l| l.t_node.len()).sum();
         let e_total: usize = leaves.iter().map(|l| l.t_ent.len()).sum();
@@ -93,6 +87,102 @@ impl Device {
             sa += l.nodes.len() as u32;
         }
         debug_assert_eq!(idx.len(), t_ent + e_total);
+        Lists {
+            idx,
+            sw,
+            s_total,
+            t_total,
+            s_node,
+            s_leaf,
+            t_node,
+            t_start,
+            t_ent,
+        }
+    }
+}
+
+/// The storage buffers of a batch, written for it.
+struct Storage {
+    /// The six vectors (`X`, `R`, `Z`, `P`, `LP`, `DIV`), `stride` floats apart.
+    vecs: wgpu::Buffer,
+    /// The complex spectrum of each leaf.
+    cpx: wgpu::Buffer,
+    /// [`Lists::idx`].
+    idx: wgpu::Buffer,
+    /// [`Lists::sw`].
+    sw: wgpu::Buffer,
+    /// Per sample, the solution gathered there and its screening coefficient.
+    sdyn: wgpu::Buffer,
+    /// The scalars, then each leaf's partial sums of a dot product (`vdot`).
+    scal: wgpu::Buffer,
+    /// Bytes of the scalars proper (`SLOTS` a leaf), the part read back.
+    scal_bytes: u64,
+    /// Partial sums a leaf's dot product takes.
+    parts: usize,
+}
+
+/// The batch's uniform blocks and bindings, ready to encode.
+struct Bound {
+    group: wgpu::BindGroup,
+    /// Bytes between two uniform blocks (the device's offset alignment).
+    stride_b: u64,
+    /// Where the scalars are copied to be read.
+    read_scal: wgpu::Buffer,
+}
+
+impl Device {
+    /// Solve a batch; returns each leaf's solution and convergence, and where the time went.
+    pub(super) fn run(
+        &mut self,
+        leaves: Vec<&Prepared>,
+    ) -> std::result::Result<(Vec<Reply0>, Timing), String> {
+        let scopes = adapter::push_scopes(&self.device);
+        let out =
+            std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| self.run_inner(&leaves)));
+        let (errors, _) = adapter::pop_scopes(scopes, &self.trouble);
+        let out = match out {
+            Ok(r) => r,
+            Err(_) => Err("a panic inside wgpu".to_string()),
+        };
+        if !errors.is_empty() {
+            self.bufs = Buffers::default();
+            return Err(errors.join("; "));
+        }
+        out
+    }
+
+    /// The steps of [`Device::run`], inside its error scopes.
+    fn run_inner(
+        &mut self,
+        leaves: &[&Prepared],
+    ) -> std::result::Result<(Vec<Reply0>, Timing), String> {
+        let t_begin = Instant::now();
+        let nn = self.n * self.n * self.n;
+        let stride = (self.max_batch * nn) as u32;
+        let lists = Lists::new(leaves, nn);
+        let store = self.upload(leaves, &lists, stride);
+        let (plan, start_ops) = Plan::batch(&self.shape(&lists, leaves.len(), stride, store.parts));
+        let bound = self.bind(&plan, &store);
+        let t_kernels = Instant::now();
+        let (sc, submissions) =
+            self.iterate(&plan, start_ops, lists.s_total > 0, &store, &bound)?;
+        let t_read = Instant::now();
+        let xs = self.read_solutions(&store.vecs, leaves.len(), nn)?;
+        let timing = Timing {
+            submissions,
+            upload_s: (t_kernels - t_begin).as_secs_f64(),
+            kernel_s: (t_read - t_kernels).as_secs_f64(),
+            read_s: t_read.elapsed().as_secs_f64(),
+        };
+        Ok((with_convergence(xs, &sc), timing))
+    }
+
+    /// The batch's storage buffers (grown as needed), with each leaf's divergence, the lists
+    /// and zeroed scalars written to them.
+    fn upload(&mut self, leaves: &[&Prepared], lists: &Lists, stride: u32) -> Storage {
+        let nn = self.n * self.n * self.n;
+        let b = leaves.len();
+        let dev = self.device.clone();
         let st = U::STORAGE | U::COPY_DST | U::COPY_SRC;
         let storage = |slot: &mut Option<wgpu::Buffer>, label: &str, bytes: usize| {
             ensure(&dev, slot, label, bytes as u64, st)
@@ -103,9 +193,9 @@ impl Device {
             6 * stride as usize * 4,
         );
         let cpx = storage(&mut self.bufs.cpx, "solve spectrum", b * nn * 8);
-        let ib = storage(&mut self.bufs.idx, "solve indices", idx.len() * 4);
-        let swb = storage(&mut self.bufs.sw, "solve weights", sw.len() * 4);
-        let sdyn = storage(&mut self.bufs.sdyn, "solve samples", s_total * 8);
+        let ib = storage(&mut self.bufs.idx, "solve indices", lists.idx.len() * 4);
+        let swb = storage(&mut self.bufs.sw, "solve weights", lists.sw.len() * 4);
+        let sdyn = storage(&mut self.bufs.sdyn, "solve samples", lists.s_total * 8);
         // The scalars, then each leaf's partial sums of a dot product (`vdot`).
         let parts = (nn / DOT_NODES).clamp(1, 64);
         let scal_bytes = (b * SLOTS * 4) as u64;
@@ -119,14 +209,30 @@ impl Device {
             let at = ((DIV as usize * stride as usize + i * nn) * 4) as u64;
             q.write_buffer(&vecs, at, bytemuck::cast_slice(&l.div));
         }
-        if !idx.is_empty() {
-            q.write_buffer(&ib, 0, bytemuck::cast_slice(&idx));
+        if !lists.idx.is_empty() {
+            q.write_buffer(&ib, 0, bytemuck::cast_slice(&lists.idx));
         }
-        if !sw.is_empty() {
-            q.write_buffer(&swb, 0, bytemuck::cast_slice(&sw));
+        if !lists.sw.is_empty() {
+            q.write_buffer(&swb, 0, bytemuck::cast_slice(&lists.sw));
         }
         q.write_buffer(&scal, 0, &vec![0u8; scal_bytes as usize]);
-        // The uniform blocks of every dispatch, written once for the batch.
+        Storage {
+            vecs,
+            cpx,
+            idx: ib,
+            sw: swb,
+            sdyn,
+            scal,
+            scal_bytes,
+            parts,
+        }
+    }
+
+    /// What the dispatches of a batch of `b` leaves with `lists` depend on: the uniform
+    /// block they start from and their workgroup grids.
+    fn shape(&self, lists: &Lists, b: usize, stride: u32, parts: usize) -> Shape {
+        let n = self.n;
+        let nn = n * n * n;
         let base = Params {
             n: n as u32,
             log2n: n.trailing_zeros(),
@@ -134,11 +240,11 @@ impl Device {
             nn: nn as u32,
             batch: b as u32,
             stride,
-            s_node: s_node as u32,
-            s_leaf: s_leaf as u32,
-            t_node: t_node as u32,
-            t_start: t_start as u32,
-            t_ent: t_ent as u32,
+            s_node: lists.s_node as u32,
+            s_leaf: lists.s_leaf as u32,
+            t_node: lists.t_node as u32,
+            t_start: lists.t_start as u32,
+            t_ent: lists.t_ent as u32,
             tw: 0,
             k2: 2 * n as u32,
             filt: (2 * n + self.h1) as u32,
@@ -156,148 +262,23 @@ impl Device {
             let gx = g.min(self.max_dim as u64);
             (gx as u32, g.div_ceil(gx) as u32)
         };
-        let mut plan = Plan {
-            blocks: Vec::new(),
-            ops: Vec::new(),
-        };
-        let spectral = |plan: &mut Plan, src: u32, dst: u32, mode: u32, all: u32| {
-            for (axis, inverse) in [(0, 0), (1, 0), (2, 0)] {
-                let ends = if axis == 0 { 1 } else { 0 };
-                plan.push(
-                    Kernel::Fft,
-                    (line_groups.0, line_groups.1, b as u32),
-                    Params {
-                        axis,
-                        inverse,
-                        ends,
-                        src,
-                        all,
-                        gx: line_groups.0,
-                        ..base
-                    },
-                );
-            }
-            plan.push(
-                Kernel::Mul,
-                (node_groups.0, node_groups.1, b as u32),
-                Params {
-                    mode,
-                    all,
-                    gx: node_groups.0,
-                    ..base
-                },
-            );
-            for axis in [2, 1, 0] {
-                let ends = if axis == 0 { 2 } else { 0 };
-                plan.push(
-                    Kernel::Fft,
-                    (line_groups.0, line_groups.1, b as u32),
-                    Params {
-                        axis,
-                        inverse: 1,
-                        ends,
-                        dst,
-                        all,
-                        gx: line_groups.0,
-                        ..base
-                    },
-                );
-            }
-        };
-        let per_node = |plan: &mut Plan, kern: Kernel, mode: u32, all: u32| {
-            plan.push(
-                kern,
-                (node_groups.0, node_groups.1, b as u32),
-                Params {
-                    mode,
-                    all,
-                    gx: node_groups.0,
-                    ..base
-                },
-            );
-        };
-        let s_groups = self.groups(s_total as u64);
-        let t_groups = self.groups(t_total as u64);
-        let samples = |plan: &mut Plan, kern: Kernel, src: u32, mode: u32, all: u32| {
-            let (g, count) = if kern == Kernel::Scatter {
-                (t_groups, t_total)
-            } else {
-                (s_groups, s_total)
-            };
-            plan.push(
-                kern,
-                (g.0, g.1, 1),
-                Params {
-                    src,
-                    mode,
-                    all,
-                    count: count as u32,
-                    gx: g.0,
-                    ..base
-                },
-            );
-        };
-        let per_leaf = |plan: &mut Plan, kern: Kernel, va: u32, vb: u32, slot: u32, all: u32| {
-            if kern == Kernel::Dot {
-                let p = Params {
-                    va,
-                    vb,
-                    slot,
-                    all,
-                    count: parts as u32,
-                    ..base
-                };
-                plan.push(kern, (parts as u32, 1, b as u32), p);
-                plan.push(Kernel::Vsum, ((b as u32).div_ceil(64), 1, 1), p);
-            } else {
-                plan.push(
-                    kern,
-                    (b as u32, 1, 1),
-                    Params {
-                        va,
-                        vb,
-                        slot,
-                        all,
-                        ..base
-                    },
-                );
-            }
-        };
-        let scalars = |plan: &mut Plan, mode: u32| {
-            plan.push(
-                Kernel::Scalars,
-                ((b as u32).div_ceil(64), 1, 1),
-                Params { mode, ..base },
-            );
-        };
-        // Start: the Poisson solve of every leaf, then the screening's start.
-        spectral(&mut plan, DIV, X, 0, 1);
-        let screened = s_total > 0;
-        if screened {
-            samples(&mut plan, Kernel::Gather, X, 0, 1);
-            per_leaf(&mut plan, Kernel::Ssum, 0, 0, 0, 1);
-            scalars(&mut plan, 0);
-            per_node(&mut plan, Kernel::Vop, 0, 0);
-            samples(&mut plan, Kernel::Coef, 0, 0, 0);
-            samples(&mut plan, Kernel::Scatter, 0, 0, 0);
-            spectral(&mut plan, R, Z, 1, 0);
-            per_leaf(&mut plan, Kernel::Dot, R, Z, SLOT_RZNEW, 0);
-            scalars(&mut plan, 1);
-            per_node(&mut plan, Kernel::Vop, 1, 0);
+        Shape {
+            base,
+            b: b as u32,
+            node_groups,
+            line_groups,
+            s_groups: self.groups(lists.s_total as u64),
+            t_groups: self.groups(lists.t_total as u64),
+            s_total: lists.s_total,
+            t_total: lists.t_total,
+            parts,
         }
-        let start_ops = plan.ops.len();
-        // One iteration.
-        samples(&mut plan, Kernel::Gather, P, 0, 0);
-        per_leaf(&mut plan, Kernel::Ssum, 0, 0, 0, 0);
-        per_leaf(&mut plan, Kernel::Dot, P, LP, SLOT_PLP, 0);
-        scalars(&mut plan, 2);
-        per_node(&mut plan, Kernel::Vop, 2, 0);
-        samples(&mut plan, Kernel::Coef, 0, 1, 0);
-        samples(&mut plan, Kernel::Scatter, 0, 0, 0);
-        spectral(&mut plan, R, Z, 1, 0);
-        per_leaf(&mut plan, Kernel::Dot, R, Z, SLOT_RZNEW, 0);
-        scalars(&mut plan, 3);
-        per_node(&mut plan, Kernel::Vop, 3, 0);
+    }
+
+    /// The uniform blocks of every dispatch of `plan`, written once for the batch, and the
+    /// bind group of the batch's buffers.
+    fn bind(&mut self, plan: &Plan, store: &Storage) -> Bound {
+        let dev = self.device.clone();
         let stride_b = (std::mem::size_of::<Params>() as u64).div_ceil(self.align) * self.align;
         let mut bytes = vec![0u8; (plan.blocks.len() as u64 * stride_b) as usize];
         for (i, p) in plan.blocks.iter().enumerate() {
@@ -311,8 +292,8 @@ impl Device {
             bytes.len() as u64,
             U::UNIFORM | U::COPY_DST,
         );
-        q.write_buffer(&params, 0, &bytes);
-        let bind = dev.create_bind_group(&wgpu::BindGroupDescriptor {
+        self.queue.write_buffer(&params, 0, &bytes);
+        let group = dev.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("solve"),
             layout: &self.layout,
             entries: &[
@@ -324,41 +305,66 @@ impl Device {
                         size: wgpu::BufferSize::new(std::mem::size_of::<Params>() as u64),
                     }),
                 },
-                entry(1, &vecs),
-                entry(2, &cpx),
+                entry(1, &store.vecs),
+                entry(2, &store.cpx),
                 entry(3, &self.consts),
-                entry(4, &ib),
-                entry(5, &swb),
-                entry(6, &sdyn),
-                entry(7, &scal),
+                entry(4, &store.idx),
+                entry(5, &store.sw),
+                entry(6, &store.sdyn),
+                entry(7, &store.scal),
             ],
         });
         let read_scal = ensure(
             &dev,
             &mut self.bufs.read_scal,
             "solve scalars read-back",
-            scal_bytes,
+            store.scal_bytes,
             U::MAP_READ | U::COPY_DST,
         );
-        let encode = |ops: &[&Op]| {
-            let mut enc = dev.create_command_encoder(&Default::default());
-            {
-                let mut pass = enc.begin_compute_pass(&Default::default());
-                for op in ops {
-                    pass.set_pipeline(self.pipes.get(op.kernel));
-                    pass.set_bind_group(0, &bind, &[(op.block as u64 * stride_b) as u32]);
-                    pass.dispatch_workgroups(op.groups.0, op.groups.1, op.groups.2);
-                }
+        Bound {
+            group,
+            stride_b,
+            read_scal,
+        }
+    }
+
+    /// One submission's commands: the dispatches `ops`, then the scalars copied to be read.
+    fn encode(&self, ops: &[&Op], store: &Storage, bound: &Bound) -> wgpu::CommandBuffer {
+        let mut enc = self.device.create_command_encoder(&Default::default());
+        {
+            let mut pass = enc.begin_compute_pass(&Default::default());
+            for op in ops {
+                pass.set_pipeline(self.pipes.get(op.kernel));
+                pass.set_bind_group(
+                    0,
+                    &bound.group,
+                    &[(op.block as u64 * bound.stride_b) as u32],
+                );
+                pass.dispatch_workgroups(op.groups.0, op.groups.1, op.groups.2);
             }
-            enc.copy_buffer_to_buffer(&scal, 0, &read_scal, 0, scal_bytes);
-            enc.finish()
-        };
+        }
+        enc.copy_buffer_to_buffer(&store.scal, 0, &bound.read_scal, 0, store.scal_bytes);
+        enc.finish()
+    }
+
+    /// Submit the start (`plan`'s first `start_ops` dispatches), then, where the batch is
+    /// `screened`, [`ITERATIONS_PER_SUBMISSION`] iterations a submission while a leaf's flag
+    /// says it runs; returns the scalars last read back and the submissions.
+    fn iterate(
+        &self,
+        plan: &Plan,
+        start_ops: usize,
+        screened: bool,
+        store: &Storage,
+        bound: &Bound,
+    ) -> std::result::Result<(Vec<f32>, u64), String> {
+        let (dev, q) = (&self.device, &self.queue);
         let mut submissions = 0u64;
-        let mut sc: Vec<f32> = Vec::with_capacity(b * SLOTS);
-        let t_kernels = Instant::now();
-        q.submit([encode(&plan.ops[..start_ops].iter().collect::<Vec<_>>())]);
+        let mut sc: Vec<f32> = Vec::with_capacity(store.scal_bytes as usize / 4);
+        let start: Vec<&Op> = plan.ops[..start_ops].iter().collect();
+        q.submit([self.encode(&start, store, bound)]);
         submissions += 1;
-        read_back(&dev, &read_scal, scal_bytes, &mut sc)?;
+        read_back(dev, &bound.read_scal, store.scal_bytes, &mut sc)?;
         if screened {
             // ITERATIONS_PER_SUBMISSION iterations a submission: a leaf that stops within one
             // skips the rest (the device's flag), so only the waits are saved.
@@ -369,15 +375,25 @@ impl Device {
             let mut rounds = 0;
             while sc.chunks(SLOTS).any(|s| s[SLOT_ACTIVE] > 0.5) && rounds <= SCREEN_MAX_ITERATIONS
             {
-                q.submit([encode(&ops)]);
+                q.submit([self.encode(&ops, store, bound)]);
                 submissions += 1;
                 rounds += ITERATIONS_PER_SUBMISSION;
                 sc.clear();
-                read_back(&dev, &read_scal, scal_bytes, &mut sc)?;
+                read_back(dev, &bound.read_scal, store.scal_bytes, &mut sc)?;
             }
         }
-        // The solutions.
-        let t_read = Instant::now();
+        Ok((sc, submissions))
+    }
+
+    /// The solutions of the batch's `b` leaves of `nn` nodes (`X`, the start of `vecs`),
+    /// copied back, a vector a leaf.
+    fn read_solutions(
+        &mut self,
+        vecs: &wgpu::Buffer,
+        b: usize,
+        nn: usize,
+    ) -> std::result::Result<Vec<Vec<f32>>, String> {
+        let dev = self.device.clone();
         let x_bytes = (b * nn * 4) as u64;
         let read_x = ensure(
             &dev,
@@ -387,32 +403,30 @@ impl Device {
             U::MAP_READ | U::COPY_DST,
         );
         let mut enc = dev.create_command_encoder(&Default::default());
-        enc.copy_buffer_to_buffer(&vecs, 0, &read_x, 0, x_bytes);
-        q.submit([enc.finish()]);
+        enc.copy_buffer_to_buffer(vecs, 0, &read_x, 0, x_bytes);
+        self.queue.submit([enc.finish()]);
         let mut xs: Vec<Vec<f32>> = Vec::with_capacity(b);
         mapped(&dev, &read_x, x_bytes, |v| {
             xs.extend(v.chunks(nn).map(|x| x.to_vec()));
         })?;
-        let out = xs
-            .into_iter()
-            .zip(sc.chunks(SLOTS))
-            .map(|(x, s)| {
-                let (rz, rz0) = (s[SLOT_RZ] as f64, s[SLOT_RZ0] as f64);
-                let conv = Convergence {
-                    iterations: s[SLOT_ITER] as u32,
-                    residual: if rz0 > 0.0 { (rz / rz0).sqrt() } else { 0.0 },
-                };
-                (x, conv)
-            })
-            .collect();
-        let timing = Timing {
-            submissions,
-            upload_s: (t_kernels - t_begin).as_secs_f64(),
-            kernel_s: (t_read - t_kernels).as_secs_f64(),
-            read_s: t_read.elapsed().as_secs_f64(),
-        };
-        Ok((out, timing))
+        Ok(xs)
     }
+}
+
+/// Each leaf's solution with its convergence from its scalars `sc` (`SLOTS` a leaf): the
+/// iterations, and the residual `√(rᵀz / r₀ᵀz₀)` (0 where `r₀ᵀz₀` is).
+fn with_convergence(xs: Vec<Vec<f32>>, sc: &[f32]) -> Vec<Reply0> {
+    xs.into_iter()
+        .zip(sc.chunks(SLOTS))
+        .map(|(x, s)| {
+            let (rz, rz0) = (s[SLOT_RZ] as f64, s[SLOT_RZ0] as f64);
+            let conv = Convergence {
+                iterations: s[SLOT_ITER] as u32,
+                residual: if rz0 > 0.0 { (rz / rz0).sqrt() } else { 0.0 },
+            };
+            (x, conv)
+        })
+        .collect()
 }
 
 pub(super) type Reply0 = (Vec<f32>, Convergence);

@@ -1,13 +1,13 @@
-//! The device side of the solve: opening the adapter's device, the bind group layout and
-//! pipelines of `shaders/solve.wgsl`, the constant tables of the grid shape, the buffers of a
-//! batch (grown as needed) and the limits that size a batch, and reading buffers back.
+//! The device side of the solve: opening the adapter's device with the pipelines of
+//! `shaders/solve.wgsl` and the constant tables of the grid shape, the limits that size a
+//! batch, the buffers of a batch (grown as needed), and reading buffers back.
 
 use std::sync::mpsc;
 use std::sync::{Arc, Mutex};
 
 use wgpu::BufferUsages as U;
 
-use super::kernels::{Params, Pipelines};
+use super::kernels::Pipelines;
 use crate::extract::gpu::adapter::{self, Trouble, describe};
 use crate::fft_solve::Solver;
 
@@ -86,7 +86,25 @@ pub(super) fn ensure(
     b
 }
 
+/// The constant tables of `n`'s grid shape (`h1 = n/2 + 1`), as `solve.wgsl` reads them:
+/// twiddles exp(−2πik/n) for k < n (pairs: the radix-3 stage reads up to 2(n/3 − 1)), |k|²
+/// by folded index (`k2`), the Poisson filter.
+fn constants(n: usize, h1: usize, k2: &[f32], filter: &[f32]) -> Vec<f32> {
+    let mut c = Vec::with_capacity(2 * n + h1 + filter.len());
+    for k in 0..n {
+        let a = -2.0 * std::f64::consts::PI * k as f64 / n as f64;
+        c.push(a.cos() as f32);
+        c.push(a.sin() as f32);
+    }
+    c.extend_from_slice(k2);
+    c.extend_from_slice(filter);
+    c
+}
+
 impl Device {
+    /// Open adapter `ad`'s device for `solver`'s grids: its pipelines, the constant tables
+    /// written, the batch sized to its limits; an error where a grid exceeds them or the
+    /// pipelines do not build.
     pub(super) fn open(ad: &wgpu::Adapter, solver: &Solver) -> std::result::Result<Device, String> {
         let info = ad.get_info();
         let opened = adapter::open_device(ad, &info)?;
@@ -103,72 +121,8 @@ impl Device {
             ));
         }
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let storage = |binding: u32| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty: wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Storage { read_only: false },
-                has_dynamic_offset: false,
-                min_binding_size: None,
-            },
-            count: None,
-        };
-        let mut entries = vec![wgpu::BindGroupLayoutEntry {
-            binding: 0,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty: wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Uniform,
-                has_dynamic_offset: true,
-                min_binding_size: wgpu::BufferSize::new(std::mem::size_of::<Params>() as u64),
-            },
-            count: None,
-        }];
-        entries.extend((1..=7).map(storage));
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("solve"),
-            entries: &entries,
-        });
-        let pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("solve"),
-            bind_group_layouts: &[Some(&layout)],
-            immediate_size: 0,
-        });
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("solve.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(include_str!("../shaders/solve.wgsl").into()),
-        });
-        let pipe = |entry: &str| {
-            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some(entry),
-                layout: Some(&pl),
-                module: &module,
-                entry_point: Some(entry),
-                compilation_options: Default::default(),
-                cache: None,
-            })
-        };
-        let pipes = Pipelines {
-            fft: pipe("fft"),
-            mul: pipe("mul"),
-            vop: pipe("vop"),
-            gather: pipe("gather"),
-            coef: pipe("coef"),
-            scatter: pipe("scatter"),
-            dot: pipe("vdot"),
-            vsum: pipe("vsum"),
-            ssum: pipe("ssum"),
-            scalars: pipe("scalars"),
-        };
-        // Constants: twiddles exp(−2πik/n) for k < n (pairs: the radix-3 stage reads up to
-        // 2(n/3 − 1)), |k|² by folded index, the Poisson filter.
-        let mut c = Vec::with_capacity(2 * n + h1 + filter.len());
-        for k in 0..n {
-            let a = -2.0 * std::f64::consts::PI * k as f64 / n as f64;
-            c.push(a.cos() as f32);
-            c.push(a.sin() as f32);
-        }
-        c.extend_from_slice(k2);
-        c.extend_from_slice(&filter);
+        let (layout, pipes) = Pipelines::build(&device);
+        let c = constants(n, h1, k2, &filter);
         let consts = ensure(
             &device,
             &mut None,

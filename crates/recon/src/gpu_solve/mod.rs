@@ -66,14 +66,16 @@
 //!
 //! - `mod.rs`: the public side ([`GpuSolver`], [`GpuSolveStats`], [`device_identity`]) and the
 //!   device thread that batches the workers' leaves;
-//! - `prep.rs`: a leaf made ready for the device (its divergence, its screen's lists);
-//! - `device.rs`: opening the adapter, the buffers and the limits that size a batch, reading
-//!   buffers back;
-//! - `kernels.rs`: the shader's uniform block, scalar slots and vectors, its pipelines, and the
-//!   plan of dispatches;
-//! - `batch.rs`: one batch on the device: its lists and uploads, the dispatch plan, the
-//!   submissions until every leaf has converged, the solutions read back;
-//! - `tests.rs`: the device solve against the CPU's, and bit-identity across batches.
+//! - `prep.rs`: a leaf made ready for the device on its worker (its divergence, its screen
+//!   with the transposed lists);
+//! - `device.rs`: opening the adapter's device, the constant tables, the limits that size a
+//!   batch, the buffers, reading buffers back;
+//! - `kernels.rs`: what the host shares with `solve.wgsl` (the uniform block, a leaf's scalar
+//!   slots, the vectors), the pipelines, and the plan of a batch's dispatches: steps 1–3
+//!   above, in their order;
+//! - `batch.rs`: one batch in steps: its lists and their upload, the uniform blocks and
+//!   bindings, the submissions until every leaf has stopped, the solutions read back (step 4);
+//! - `tests.rs`: the device solve against the CPU's, and the same bits in any batch.
 //!
 //! [`SCREEN_TOLERANCE`]: crate::fft_solve::SCREEN_TOLERANCE
 
