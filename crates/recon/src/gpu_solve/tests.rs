@@ -2,7 +2,7 @@
 //! skipped, saying so, without one).
 
 use super::*;
-use crate::fft_solve::Solver;
+use crate::fft_solve::{SCREEN_TOLERANCE, Solver};
 
 fn no_adapter() -> bool {
     if crate::extract::gpu::adapter_names().is_empty() {
