@@ -15,8 +15,8 @@
 //! of the hexahedra around it: inwards even at corners and edges, where a normal is not
 //! defined.
 
-use super::mesh::{HexMesh, quad_normal};
 use super::mesh::HEX_FACES;
+use super::mesh::{HexMesh, quad_normal};
 use crate::geom::vec::{add, dot, scale, sub};
 
 /// How far an inner copy starts from its boundary vertex, as a fraction of the way to the

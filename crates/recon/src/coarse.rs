@@ -72,7 +72,7 @@ enum Kind {
 
 /// A level of the recursive scheme seen as the coarse field of the level below it: its
 /// nodes are the coarse nodes below (its node `J` on fine node `rJ` there), its value there
-/// the blend of its own coarse field and its leaves' details ([`super::blend::blend_block`]),
+/// the blend of its own coarse field and its leaves' details ([`blend_block`]),
 /// exact in the run's fixed point.
 pub struct Level {
     /// The level's grids (its fine spacing is the coarse spacing of the level below).

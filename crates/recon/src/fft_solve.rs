@@ -41,16 +41,13 @@ use rustfft::num_complex::Complex32;
 use rustfft::{Fft, FftPlanner};
 
 pub use super::grid::{LocalGrid, SplatBox, add_boxes, splat, splat_box};
-pub(crate) use super::grid::splat_node;
 use super::screen::Screen;
-
 
 /// Solve for the smoothed indicator on `grid` from points `pos` with outward unit normals
 /// `nrm`; returns node values (x fastest). `sigma_vox` is the Gaussian width in voxels.
 pub fn solve(grid: &LocalGrid, pos: &[[f64; 3]], nrm: &[[f32; 3]], sigma_vox: f64) -> Vec<f32> {
     Solver::new(grid, sigma_vox).solve(grid, pos, nrm)
 }
-
 
 /// Solve from splatted normals (consumed).
 pub fn solve_splatted(grid: &LocalGrid, v: Vec<[f32; 3]>, sigma_vox: f64) -> Vec<f32> {

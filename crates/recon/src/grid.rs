@@ -5,7 +5,7 @@
 //! every grid of a run approximates one continuous field ([`crate::fft_solve`]'s module docs,
 //! "Scale"). The splat adds each oriented sample's normal to the eight nodes around it by
 //! trilinear weights, as a density (`V_j = Σ_i n_i w_ij / h³`): in one pass ([`splat`]), per
-//! sample ([`splat_node`], the voxel sums' path), or as per-worker boxes summed in a fixed
+//! sample (`splat_node`, the voxel sums' path), or as per-worker boxes summed in a fixed
 //! order ([`splat_box`], [`add_boxes`]), all with the same weights. The FFT solve, the
 //! screening operator, the voxel sums and the plan's memory figures all read this one grid.
 
@@ -64,9 +64,7 @@ impl LocalGrid {
         let plain = self.scratch_bytes();
         if screened {
             let h1 = (self.n / 2 + 1) as u64;
-            plain.max(
-                self.len() as u64 * SCREENED_BYTES_PER_NODE + 2 * h1 * h1 * h1 * 4,
-            )
+            plain.max(self.len() as u64 * SCREENED_BYTES_PER_NODE + 2 * h1 * h1 * h1 * 4)
         } else {
             plain
         }

@@ -4,14 +4,14 @@
 pub use super::checkpoint::LeafDetail;
 use super::coarse::CoarseGrid;
 use super::fft_solve::Solver;
-use super::grid::{LocalGrid, splat};
 use super::gpu_solve::{GpuSolveStats, GpuSolver};
+use super::grid::{LocalGrid, splat};
 use super::plan::Plan;
 use super::screen::{Screen, ScreenBuilder};
 use super::voxel_sum::{OnLattice, VOXEL_SUM_BYTES, VoxelSum, restrict, splat_voxels};
 use crate::extract::gpu::GpuMode;
 use crate::pou::quantise_detail;
-use crate::types::{CellKey, Detail};
+use crate::types::CellKey;
 
 /// The points a leaf solves: those of its cell first, then those of the rest of its 1.3125× box.
 /// A leaf of a level above the finest reads dense store cells summed per voxel of its

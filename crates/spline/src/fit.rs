@@ -34,8 +34,8 @@ use rayon::prelude::*;
 use super::basis::GAUSS4;
 use super::hier::{Hierarchy, Leaf, LocalBasis, Support};
 use super::tensor;
-use crate::sparse::{Triplets, cholesky, factor_bytes, lu};
 use crate::error::Setting;
+use crate::sparse::{Triplets, cholesky, factor_bytes, lu};
 use crate::types::TensorSurface;
 
 /// Which fairness energy regularises the fit (§6).

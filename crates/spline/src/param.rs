@@ -120,7 +120,6 @@ pub struct Param {
     pub iterations: usize,
 }
 
-
 /// The frame of [`pca_frame`] turned to the plane normal to `normal` (unit): the first axis is
 /// the principal one projected into that plane (any perpendicular when it is parallel to
 /// `normal`), the second `normal × first`.

@@ -78,7 +78,12 @@ mod tests {
     fn all_flags() -> BTreeSet<String> {
         fn walk(c: &clap::Command, out: &mut BTreeSet<String>) {
             for a in c.get_arguments() {
-                out.extend(a.get_long_and_visible_aliases().into_iter().flatten().map(|l| format!("--{l}")));
+                out.extend(
+                    a.get_long_and_visible_aliases()
+                        .into_iter()
+                        .flatten()
+                        .map(|l| format!("--{l}")),
+                );
                 out.extend(a.get_short().map(|s| format!("-{s}")));
             }
             for s in c.get_subcommands() {
@@ -94,7 +99,11 @@ mod tests {
     fn every_setting_is_a_flag_a_command_takes() {
         let flags = all_flags();
         for &s in Setting::ALL {
-            assert!(flags.contains(flag(s)), "{s:?} maps to {}, which no command takes", flag(s));
+            assert!(
+                flags.contains(flag(s)),
+                "{s:?} maps to {}, which no command takes",
+                flag(s)
+            );
             assert_eq!(Setting::from_name(s.name()), Some(s));
         }
         let mut seen = BTreeSet::new();
@@ -159,7 +168,10 @@ mod tests {
     /// line's flags; messages name a [`Setting`] instead.
     #[test]
     fn no_library_message_spells_a_flag() {
-        let flags: Vec<String> = all_flags().into_iter().filter(|f| f.starts_with("--")).collect();
+        let flags: Vec<String> = all_flags()
+            .into_iter()
+            .filter(|f| f.starts_with("--"))
+            .collect();
         let crates = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
         let mut found = Vec::new();
         let mut files = 0;
@@ -167,7 +179,11 @@ mod tests {
         while let Some(dir) = stack.pop() {
             for e in std::fs::read_dir(&dir).unwrap() {
                 let p = e.unwrap().path();
-                let rel = p.strip_prefix(&crates).unwrap().to_string_lossy().into_owned();
+                let rel = p
+                    .strip_prefix(&crates)
+                    .unwrap()
+                    .to_string_lossy()
+                    .into_owned();
                 if p.is_dir() {
                     let skip = rel == "cli" || rel.ends_with("/tests") || rel.ends_with("/benches");
                     if !skip {
@@ -179,7 +195,8 @@ mod tests {
                     for lit in literals(&code_of(&text)) {
                         for f in &flags {
                             let spelled = lit.match_indices(f.as_str()).any(|(i, _)| {
-                                !lit[i + f.len()..].starts_with(|c: char| c.is_ascii_alphanumeric() || c == '-')
+                                !lit[i + f.len()..]
+                                    .starts_with(|c: char| c.is_ascii_alphanumeric() || c == '-')
                             });
                             if spelled {
                                 found.push(format!("{rel}: {f} in {lit:?}"));
@@ -189,8 +206,16 @@ mod tests {
                 }
             }
         }
-        assert!(files > 100, "read only {files} library files from {}", crates.display());
-        assert!(found.is_empty(), "flags spelled outside the command line:\n{}", found.join("\n"));
+        assert!(
+            files > 100,
+            "read only {files} library files from {}",
+            crates.display()
+        );
+        assert!(
+            found.is_empty(),
+            "flags spelled outside the command line:\n{}",
+            found.join("\n")
+        );
     }
 
     #[test]

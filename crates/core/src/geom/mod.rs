@@ -14,5 +14,5 @@ pub mod vec;
 
 pub use eigen::least_eigenvector;
 pub use frame::plane_basis;
-pub use vec::{cross, dot};
 pub use rect::{Rect, RectWorkspace, min_area_rect, min_area_rect_with};
+pub use vec::{cross, dot};

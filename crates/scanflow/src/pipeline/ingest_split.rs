@@ -142,7 +142,10 @@ pub fn ingest_split(
     prep.limit_buffers(SPLIT_BUFFER_BYTES);
     let options = [
         ("command", "ingest".to_string()),
-        (Setting::MaxCellPoints.name(), sp.max_cell_points.to_string()),
+        (
+            Setting::MaxCellPoints.name(),
+            sp.max_cell_points.to_string(),
+        ),
         (Setting::SkipInvalid.name(), sp.skip_invalid.to_string()),
         (Setting::ZstdLevel.name(), sp.zstd_level.to_string()),
         // The counting grid and the cell buffers follow the budget (and the cells' frames
@@ -267,12 +270,14 @@ fn complete(out: &Path, inputs: &[InputSpec], params: &IngestParams) -> Result<b
         ));
     }
     match (&m.estimated_normals, params.normals) {
-        (Some(_), NormalsMode::Use) => {
-            differ.push(format!("{}: estimated there, the inputs' here", Setting::Normals))
-        }
-        (None, NormalsMode::Estimate) => {
-            differ.push(format!("{}: the inputs' there, estimated here", Setting::Normals))
-        }
+        (Some(_), NormalsMode::Use) => differ.push(format!(
+            "{}: estimated there, the inputs' here",
+            Setting::Normals
+        )),
+        (None, NormalsMode::Estimate) => differ.push(format!(
+            "{}: the inputs' there, estimated here",
+            Setting::Normals
+        )),
         (Some(e), _) if e.k != params.normal_params.k => differ.push(format!(
             "{} {} there, {} here",
             Setting::Neighbours,
@@ -292,7 +297,8 @@ fn complete(out: &Path, inputs: &[InputSpec], params: &IngestParams) -> Result<b
             out,
             format!(
                 "output store already exists and was made with other options ({}); remove it or choose another {}",
-                differ.join("; ")
+                differ.join("; "),
+                Setting::Output
             ),
         ));
     }

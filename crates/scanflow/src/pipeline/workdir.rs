@@ -159,7 +159,10 @@ impl RunIdentity {
             StoreSource::Points(specs) => {
                 put(Setting::Normals.name(), format!("{normals:?}"));
                 put(Setting::Neighbours.name(), normal_params.k.to_string());
-                put(Setting::RobustNormals.name(), normal_params.robust.to_string());
+                put(
+                    Setting::RobustNormals.name(),
+                    normal_params.robust.to_string(),
+                );
                 put(
                     Setting::FixedNeighbours.name(),
                     (!normal_params.adaptive).to_string(),

@@ -86,7 +86,7 @@ fn an_e57_of_six_posed_scans_reconstructs_the_sphere() {
     let broken = d.join("broken.e57");
     let bytes = std::fs::read(&e57).unwrap();
     std::fs::write(&broken, &bytes[..bytes.len() / 2]).unwrap();
-    let e = super::common::fails(&["info", s(&broken)]);
+    let e = super::super::common::fails(&["info", s(&broken)]);
     assert!(e.contains("broken.e57"), "{e}");
 }
 
@@ -101,7 +101,7 @@ fn confidence_weighting_lets_trusted_samples_win() {
     let d = dir.path();
     let clean = d.join("clean.ply");
     ok(&["synth", "sphere", "--points", "30000", "-o", s(&clean)]);
-    let b = super::common::load(&clean);
+    let b = super::super::common::load(&clean);
     let mut rng = rand_pcg::Pcg64::seed_from_u64(7);
     let mut gauss = |sd: f64| {
         // Box-Muller.

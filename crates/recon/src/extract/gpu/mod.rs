@@ -275,9 +275,7 @@ impl GpuExtractor {
                 );
                 Ok(Some(g))
             }
-            Err(e) if mode == GpuMode::On => {
-                Err(Error::Usage(format!("{} on: {e}", Setting::Gpu)))
-            }
+            Err(e) if mode == GpuMode::On => Err(Error::Usage(format!("{} on: {e}", Setting::Gpu))),
             Err(e) => {
                 log::warn!("marching cubes on the CPU: {e}");
                 Ok(None)

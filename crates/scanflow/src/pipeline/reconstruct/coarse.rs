@@ -323,8 +323,7 @@ pub(super) fn coarse_pass(
             occupied.extend(&r.leaves);
         }
         let boxes: Vec<&grid::SplatBox> = parts.iter().map(|r| &r.splat).collect();
-        ctx.pool
-            .install(|| grid::add_boxes(&cgrid, &boxes, &mut v));
+        ctx.pool.install(|| grid::add_boxes(&cgrid, &boxes, &mut v));
         if screened {
             let aggregates: Vec<&[_]> = parts.iter().map(|r| &r.screen[..]).collect();
             ctx.pool.install(|| screen.add_parts(&aggregates));

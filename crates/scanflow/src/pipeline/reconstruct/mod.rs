@@ -212,7 +212,10 @@ impl ReconParams {
                 ),
             ),
             (Setting::Error.name(), params.solve.error.to_string()),
-            (Setting::MinPoints.name(), params.solve.min_points.to_string()),
+            (
+                Setting::MinPoints.name(),
+                params.solve.min_points.to_string(),
+            ),
             (Setting::Trim.name(), params.mesh.trim.to_string()),
             (
                 Setting::NoFit.name(),
@@ -229,7 +232,10 @@ impl ReconParams {
                 crate::recon::gpu_solve::device_identity(params.run.gpu_solve)?,
             ),
             (Setting::Density.name(), params.mesh.density.to_string()),
-            (Setting::Confidence.name(), params.solve.confidence.to_string()),
+            (
+                Setting::Confidence.name(),
+                params.solve.confidence.to_string(),
+            ),
             (
                 Setting::SamplesPerNode.name(),
                 params

@@ -209,7 +209,10 @@ impl MeshSink {
         let _permit = match self.islands {
             true => Some(ctx.budget.acquire(
                 crate::io::islands::BYTES_PER_VERTEX * writer.vertices(),
-                &format!("the connected pieces of the mesh ({})", Setting::TrimIslands),
+                &format!(
+                    "the connected pieces of the mesh ({})",
+                    crate::error::Setting::TrimIslands
+                ),
             )?),
             false => None,
         };
