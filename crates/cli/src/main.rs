@@ -40,7 +40,6 @@ fn one_malloc_arena() {
 fn main() -> ExitCode {
     #[cfg(all(target_os = "linux", target_env = "gnu"))]
     one_malloc_arena();
-    cli::flags::install();
     cli::logger::install();
     let parsed = match Cli::parse_from_args(std::env::args_os()) {
         Ok(parsed) => parsed,

@@ -184,7 +184,7 @@ static FRONT_END_NAMES: std::sync::OnceLock<fn(Setting) -> &'static str> =
 
 impl Setting {
     /// Name every setting by `names` in every message from now on: a front end's spelling
-    /// (the command line installs its flags first thing). Only the first call counts, as
+    /// (the command line installs its flags before it parses). Only the first call counts, as
     /// with a logger.
     pub fn name_by(names: fn(Setting) -> &'static str) {
         let _ = FRONT_END_NAMES.set(names);

@@ -1,9 +1,10 @@
 //! The command line's names for the library's settings.
 //!
 //! The library never spells a flag: a message that points at a setting names a
-//! [`Setting`] (`` `work_dir` `` to a library caller). [`install`], first thing in `main`,
-//! makes every message, log line and report name them by the flags below instead, so a
-//! user reads `--work-dir`. The map is one exhaustive `match`: a setting added to the
+//! [`Setting`] (`` `work_dir` `` to a library caller). [`install`], which
+//! [`Cli::parse_from_args`](crate::cli::args::Cli::parse_from_args) calls before clap parses
+//! (so in `main` and in every test that parses), makes every message, log line and report
+//! name them by the flags below instead, so a user reads `--work-dir`. The map is one exhaustive `match`: a setting added to the
 //! library without a flag here does not compile, and a test checks that every flag it
 //! names is one a command takes.
 
@@ -98,6 +99,7 @@ mod tests {
     #[test]
     fn every_setting_is_a_flag_a_command_takes() {
         let flags = all_flags();
+        let mut seen = BTreeSet::new();
         for &s in Setting::ALL {
             assert!(
                 flags.contains(flag(s)),
@@ -105,9 +107,6 @@ mod tests {
                 flag(s)
             );
             assert_eq!(Setting::from_name(s.name()), Some(s));
-        }
-        let mut seen = BTreeSet::new();
-        for &s in Setting::ALL {
             assert!(seen.insert(flag(s)), "two settings map to {}", flag(s));
         }
     }
@@ -116,7 +115,7 @@ mod tests {
     /// modules removed), roughly: enough to find a flag spelled in a message.
     fn literals(code: &str) -> Vec<String> {
         let mut out = Vec::new();
-        let mut chars = code.chars().peekable();
+        let mut chars = code.chars();
         let mut prev = ' ';
         while let Some(c) = chars.next() {
             if c == '\'' && prev != '\\' {
