@@ -22,6 +22,8 @@
 //! * [`e57`]: E57, every scan with its pose (one input per scan for ingest);
 //! * [`xyz`]: XYZ / PTS text (`text.rs` the layouts, tokenizer and line walk, `decode.rs` the
 //!   values);
+//! * [`mesh`]: the [`mesh::Mesh`] every mesh reader fills (below the readers, so none imports
+//!   the dispatcher);
 //! * [`mesh_read`]: meshes in any format, for `scanflow check`, `fit` and tests:
 //!   [`mesh_read::read_any_mesh`] reads OBJ ([`obj`]) and STL ([`stl`]) by extension, PLY
 //!   through [`ply`] (whose [`mesh_read::read_mesh`] and [`mesh_read::read_scan_mesh`] it
@@ -35,8 +37,8 @@
 //! * [`ply_write`]: point PLY ([`ply_write::PointPlyWriter`]; a re-export of
 //!   [`ply::point_writer`]);
 //! * [`mesh_write`]: the streamed mesh of ARCHITECTURE.md step 5, as PLY (binary or ASCII),
-//!   OBJ or STL ([`mesh_write::MeshWriter`]): the API and the staging, and the OBJ and STL
-//!   encoders; the PLY ones are in [`ply`];
+//!   OBJ or STL ([`mesh_write::MeshWriter`]): the API, the staging and the three encoders (the
+//!   PLY one writes its header from [`ply`]'s model);
 //! * [`preview`]: a PNG picture of a mesh (three views), rasterised as the mesh streams to
 //!   its writer;
 //!
@@ -56,6 +58,7 @@ pub mod e57;
 pub mod islands;
 pub mod las;
 pub mod las_meta;
+pub mod mesh;
 pub mod mesh_read;
 pub mod mesh_write;
 pub mod obj;

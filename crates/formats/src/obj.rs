@@ -30,7 +30,7 @@ use std::io::{BufRead, BufReader};
 use std::path::Path;
 
 use crate::error::{Error, IoContext, Location, Result};
-use crate::mesh_read::Mesh;
+use crate::mesh::Mesh;
 
 /// Read a Wavefront OBJ file as a triangle mesh (see the module docs for what is read).
 pub fn read_obj(path: &Path) -> Result<Mesh> {

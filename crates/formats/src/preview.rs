@@ -236,7 +236,7 @@ mod tests {
 
     /// The octahedron with corners ±e_i, as outward triangles.
     fn octahedron() -> Vec<[[f64; 3]; 3]> {
-        let m = crate::mesh_read::Mesh::octahedron();
+        let m = crate::mesh::Mesh::octahedron();
         m.triangles
             .iter()
             .map(|t| t.map(|i| m.vertices[i as usize]))

@@ -22,7 +22,7 @@ use std::io::{BufRead, BufReader, Read};
 use std::path::Path;
 
 use crate::error::{Error, IoContext, Location, Result};
-use crate::mesh_read::Mesh;
+use crate::mesh::Mesh;
 
 /// Bytes of the binary header and count, and of one binary triangle.
 const HEADER: u64 = 84;

@@ -75,8 +75,8 @@
 //!
 //! This module holds the API ([`MeshWriter`], [`MeshFormat`], [`VertexFormat`], [`MeshTarget`]);
 //! `staging` the temporary files where vertices, faces and normals wait until `finish`; the
-//! encoders: PLY's (binary and ASCII) in [`crate::ply`], with the other PLY readers and
-//! writers, and here `obj` and `stl`, with `text` the numbers the text encoders write.
+//! encoders `ply` (binary and ASCII, its header written from [`crate::ply`]'s model, which the
+//! PLY readers parse into), `obj` and `stl`, with `text` the numbers the text encoders write.
 
 use std::io::{BufWriter, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
@@ -86,12 +86,13 @@ use crate::error::{Error, IoContext, Result, Setting};
 use crate::fs::atomic::{AtomicFile, with_suffix};
 
 mod obj;
+mod ply;
 mod staging;
 mod stl;
 pub(crate) mod text;
 
-use crate::ply::mesh_encoder::FACE_BYTES;
-pub use crate::ply::mesh_encoder::header_bytes;
+use ply::FACE_BYTES;
+pub use ply::header_bytes;
 use staging::{STAGE_BYTES, STAGE_FACE_BYTES, Stage, Staged, stream_faces};
 use stl::{STL_HEADER, STL_TRIANGLE};
 

@@ -1,9 +1,9 @@
 //! Tests of the streamed mesh writer: each format read back, normals, islands, failures.
 
+use super::ply::header;
 use super::*;
 use crate::PointReader;
 use crate::ply::PlyReader;
-use crate::ply::mesh_encoder::header;
 use crate::types::PointBatch;
 
 const TETRA: [[f64; 3]; 4] = [

@@ -32,22 +32,23 @@
 //!   the table of type names, [`Encoding`] with the `format` keywords) and its parser,
 //!   [`parse_header`], which every reader goes through;
 //! * `write.rs`: the header writer both writers go through (the text of a header from the same
-//!   model), the vertex properties they share and their binary encoding;
+//!   model), the vertex properties they share and their binary encoding: the point writer
+//!   here, and the PLY encoders of the streamed mesh writer ([`crate::mesh_write`], which
+//!   stages the mesh and encodes it as PLY, OBJ or STL from its `finish`);
 //! * `point_reader/`: [`PlyReader`], the `vertex` element as points (`decode.rs` the records);
 //! * `mesh_reader/`: [`read_mesh`] and [`read_scan_mesh`], the vertices through [`PlyReader`]
 //!   and the triangles from the `face` element (`faces.rs`) or a scan's `range_grid`
 //!   (`range_grid.rs`), and [`ply_face_count`] (all re-exported by [`crate::mesh_read`]).
 //! * `point_writer.rs`: [`point_writer::PointPlyWriter`], points as binary little-endian PLY
-//!   (also reached as [`crate::ply_write`]);
-//! * `mesh_encoder.rs`: the binary and ASCII PLY encoders of the streamed mesh writer
-//!   ([`crate::mesh_write`], which stages the mesh and calls them from its `finish`).
+//!   (also reached as [`crate::ply_write`]).
+//!
+//! Nothing here imports the mesh writer: it depends on this module, not the other way.
 
 mod header;
-pub(crate) mod mesh_encoder;
 mod mesh_reader;
 mod point_reader;
 pub mod point_writer;
-mod write;
+pub(crate) mod write;
 
 pub use header::{Element, Encoding, PlyHeader, Property, Scalar, parse_header};
 pub use mesh_reader::{ply_face_count, read_mesh, read_scan_mesh};

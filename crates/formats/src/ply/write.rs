@@ -1,5 +1,5 @@
 //! What both PLY writers share, the point writer (`point_writer.rs`) and the mesh encoders
-//! (`mesh_encoder.rs`): the header text, written from the header model the readers parse into
+//! (the streamed mesh writer's, in [`crate::mesh_write`]): the header text, written from the header model the readers parse into
 //! ([`header_text`]); the vertex properties both start with ([`vertex_element`]); and the
 //! binary little-endian encoding of those ([`put_position`], [`put_f32`]). Each writer adds
 //! its own properties and elements after them.

@@ -37,7 +37,7 @@ use super::header::HEADER_LIMIT;
 use super::{Encoding, PlyHeader, PlyReader, parse_header};
 use crate::PointReader;
 use crate::error::{Error, IoContext, Location, Result};
-use crate::mesh_read::Mesh;
+use crate::mesh::Mesh;
 use crate::types::PointBatch;
 use faces::{FaceLayout, FaceSink, ListSink, Source, read_ascii_faces, read_binary_faces};
 

@@ -1,21 +1,21 @@
-//! The PLY encoders of the streamed mesh writer ([`crate::mesh_write`], which stages the mesh
-//! and calls them from `finish`): the binary little-endian writer with its fixed-size header
-//! (the room for the largest counts, padded by a comment line), and the ASCII writer with the
-//! same header unpadded. The header's grammar and the record layout are documented in
-//! [`crate::mesh_write`]; the header is written from the model the readers parse into
-//! (`write.rs`), its vertex element starting as the point writer's does.
+//! The PLY encoders of the streamed mesh writer ([`super`], which stages the mesh and calls
+//! them from `finish`): the binary little-endian writer with its fixed-size header (the room
+//! for the largest counts, padded by a comment line), and the ASCII writer with the same
+//! header unpadded. The header's grammar and the record layout are documented in [`super`];
+//! the header is written from the model the PLY readers parse into ([`crate::ply`]'s header
+//! writer), its vertex element starting as the point writer's does.
 
 use std::fmt::Write as _;
 use std::io::Write;
 
-use super::write::{WRITTEN_BY, header_text, put_f32, put_position, vertex_element};
-use super::{Element, Encoding, Property, Scalar};
+use super::text::num;
+use super::{MeshWriter, VertexFormat};
 use crate::error::{IoContext, Result};
-use crate::mesh_write::text::num;
-use crate::mesh_write::{MeshWriter, VertexFormat};
+use crate::ply::write::{WRITTEN_BY, header_text, put_f32, put_position, vertex_element};
+use crate::ply::{Element, Encoding, Property, Scalar};
 
 /// Bytes of one binary PLY face record: the count byte and 3 indices.
-pub(crate) const FACE_BYTES: u64 = 1 + 3 * 4;
+pub(super) const FACE_BYTES: u64 = 1 + 3 * 4;
 
 /// The header's elements: the vertex element of format `f` ([`vertex_element`] and
 /// `scalar_intensity`, `quality`), then the faces, their indices declared `int` while the
@@ -54,7 +54,7 @@ pub fn header_bytes(f: VertexFormat) -> usize {
 
 /// The binary header for the given counts, padded to exactly `header_bytes(f)` bytes by a
 /// comment of spaces after [`WRITTEN_BY`].
-pub(crate) fn header(vertices: u64, faces: u64, f: VertexFormat) -> String {
+pub(super) fn header(vertices: u64, faces: u64, f: VertexFormat) -> String {
     let els = elements(vertices, faces, f);
     let unpadded = header_text(Encoding::BinaryLe, &[WRITTEN_BY], &els).len();
     let pad = " ".repeat(header_bytes(f) - unpadded - PAD_MIN);
@@ -62,7 +62,7 @@ pub(crate) fn header(vertices: u64, faces: u64, f: VertexFormat) -> String {
 }
 
 impl MeshWriter {
-    pub(crate) fn write_ply_binary(&mut self, w: &mut impl Write) -> Result<()> {
+    pub(super) fn write_ply_binary(&mut self, w: &mut impl Write) -> Result<()> {
         let (vf, tmp) = (self.vertex_format(), self.tmp_path().to_path_buf());
         let (vertices, faces) = self.counts_out();
         w.write_all(header(vertices, faces, vf).as_bytes())
@@ -95,7 +95,7 @@ impl MeshWriter {
         })
     }
 
-    pub(crate) fn write_ply_ascii(&mut self, w: &mut impl Write) -> Result<()> {
+    pub(super) fn write_ply_ascii(&mut self, w: &mut impl Write) -> Result<()> {
         let (vf, tmp) = (self.vertex_format(), self.tmp_path().to_path_buf());
         let (vertices, faces) = self.counts_out();
         let h = header_text(
