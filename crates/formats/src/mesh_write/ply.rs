@@ -63,7 +63,7 @@ pub(super) fn header(vertices: u64, faces: u64, f: VertexFormat) -> String {
 
 impl MeshWriter {
     pub(super) fn write_ply_binary(&mut self, w: &mut impl Write) -> Result<()> {
-        let (vf, tmp) = (self.vertex_format(), self.tmp_path().to_path_buf());
+        let (vf, tmp) = (self.vf, self.tmp_path.clone());
         let (vertices, faces) = self.counts_out();
         w.write_all(header(vertices, faces, vf).as_bytes())
             .with_path(&tmp)?;
@@ -96,7 +96,7 @@ impl MeshWriter {
     }
 
     pub(super) fn write_ply_ascii(&mut self, w: &mut impl Write) -> Result<()> {
-        let (vf, tmp) = (self.vertex_format(), self.tmp_path().to_path_buf());
+        let (vf, tmp) = (self.vf, self.tmp_path.clone());
         let (vertices, faces) = self.counts_out();
         let h = header_text(
             Encoding::Ascii,

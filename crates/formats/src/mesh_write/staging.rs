@@ -5,7 +5,7 @@
 
 use std::fs::File;
 use std::io::{BufReader, BufWriter, Read, Write};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use super::{BUF_BYTES, MeshWriter};
 use crate::error::{Error, IoContext, Result};
@@ -138,11 +138,6 @@ pub(super) fn stream_faces(
 
 /// Reading the stages back, for the encoders.
 impl MeshWriter {
-    /// The output's temporary name, which the encoders' errors name.
-    pub(crate) fn tmp_path(&self) -> &Path {
-        &self.tmp_path
-    }
-
     /// The staged vertices, mapped (complete, no longer written: this writer's own file,
     /// which nothing else truncates while the map lives).
     pub(super) fn map_vertices(&mut self) -> Result<crate::fs::mmap::Window> {
