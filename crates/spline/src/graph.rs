@@ -324,17 +324,9 @@ mod tests {
 
     #[test]
     fn closed_triangulation_is_not_a_disc() {
-        // An octahedron.
-        let t = [
-            [0, 2, 4],
-            [2, 1, 4],
-            [1, 3, 4],
-            [3, 0, 4],
-            [2, 0, 5],
-            [1, 2, 5],
-            [3, 1, 5],
-            [0, 3, 5],
-        ];
+        let oct = scanflow_formats::mesh::Mesh::octahedron();
+        let t = oct.triangles;
+        assert_eq!(oct.vertices.len(), 6);
         let e = Graph::from_triangles(src(), 6, &t).unwrap_err().to_string();
         assert!(
             e.contains("patch.ply") && e.contains("no boundary") && e.contains("`patches`"),
